@@ -1,0 +1,64 @@
+//! Acceleration structures and the one query surface they share.
+
+use glam::Vec3;
+
+use crate::mesh::TriMesh;
+use crate::ray::{Hit, Ray};
+
+pub mod brute;
+pub mod grid;
+
+/// An axis-aligned box. [`Aabb::EMPTY`] has `min > max` and contains nothing.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Aabb {
+    /// Lower corner.
+    pub min: Vec3,
+    /// Upper corner.
+    pub max: Vec3,
+}
+
+impl Aabb {
+    /// The box that contains nothing; growing it by a point gives that point.
+    pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
+
+    /// The smallest box holding `self` and `p`.
+    #[inline]
+    pub fn grow(self, p: Vec3) -> Aabb {
+        Aabb { min: self.min.min(p), max: self.max.max(p) }
+    }
+
+    /// True when the box holds no point.
+    pub fn is_empty(&self) -> bool {
+        !(self.min.x <= self.max.x && self.min.y <= self.max.y && self.min.z <= self.max.z)
+    }
+
+    /// Edge lengths (zero for an empty box).
+    pub fn extent(&self) -> Vec3 {
+        if self.is_empty() {
+            Vec3::ZERO
+        } else {
+            self.max - self.min
+        }
+    }
+
+    /// The bounds of a triangle.
+    #[inline]
+    pub fn of_triangle(t: &[Vec3; 3]) -> Aabb {
+        Aabb { min: t[0].min(t[1]).min(t[2]), max: t[0].max(t[1]).max(t[2]) }
+    }
+}
+
+/// The three questions every structure answers, about the mesh it was built from.
+///
+/// Guarantees shared by every implementation: the same watertight triangle test
+/// ([`crate::ray::PreparedRay::intersect_triangle`]) and the same tie rule ([`Hit::beats`]), so the
+/// closest hit is bit-identical across structures; `occluded` is true exactly when `intersect` hits;
+/// neither allocates nor panics, whatever the ray.
+pub trait RayQuery {
+    /// A box holding every triangle the structure can report.
+    fn bounds(&self) -> Aabb;
+    /// The closest hit in `[tmin, tmax]`, ties to the lowest primitive id, or [`Hit::MISS`].
+    fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit;
+    /// True when any triangle is hit in `[tmin, tmax]`.
+    fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool;
+}

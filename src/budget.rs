@@ -1,0 +1,104 @@
+//! Fallible allocation with a memory limit: every byte a build holds is counted here.
+
+use alloc::vec::Vec;
+
+use crate::error::BuildError;
+
+/// Counts the bytes a build holds and refuses growth past a limit or when the allocator fails.
+///
+/// Guarantees: [`MemoryBudget::vec`] never aborts; it returns [`BuildError::MemoryLimit`] before
+/// asking the allocator when the limit would be passed, and [`BuildError::OutOfMemory`] when the
+/// allocator says no. `used` is the sum of the capacities (in bytes) handed out and not yet released.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct MemoryBudget {
+    limit: usize,
+    used: usize,
+    peak: usize,
+}
+
+impl MemoryBudget {
+    /// A budget with a limit in bytes; 0 means no limit.
+    pub const fn new(limit: usize) -> Self {
+        MemoryBudget { limit, used: 0, peak: 0 }
+    }
+
+    /// Bytes currently held.
+    pub fn used(&self) -> usize {
+        self.used
+    }
+
+    /// The most bytes held at once.
+    pub fn peak(&self) -> usize {
+        self.peak
+    }
+
+    /// The limit in bytes (0 = none).
+    pub fn limit(&self) -> usize {
+        self.limit
+    }
+
+    /// Accounts for `bytes` more, or says why not.
+    pub fn charge(&mut self, bytes: usize, what: &'static str) -> Result<(), BuildError> {
+        let needed = self.used.checked_add(bytes).ok_or(BuildError::OutOfMemory { what, bytes })?;
+        if self.limit != 0 && needed > self.limit {
+            return Err(BuildError::MemoryLimit { what, needed, limit: self.limit });
+        }
+        self.used = needed;
+        self.peak = self.peak.max(needed);
+        Ok(())
+    }
+
+    /// Gives back `bytes` charged earlier.
+    pub fn release(&mut self, bytes: usize) {
+        self.used = self.used.saturating_sub(bytes);
+    }
+
+    /// An empty vector with room for exactly `len` elements, charged to the budget.
+    pub fn vec<T>(&mut self, len: usize, what: &'static str) -> Result<Vec<T>, BuildError> {
+        let bytes = len
+            .checked_mul(core::mem::size_of::<T>())
+            .ok_or(BuildError::OutOfMemory { what, bytes: usize::MAX })?;
+        self.charge(bytes, what)?;
+        let mut v = Vec::new();
+        if v.try_reserve_exact(len).is_err() {
+            self.release(bytes);
+            return Err(BuildError::OutOfMemory { what, bytes });
+        }
+        Ok(v)
+    }
+
+    /// A vector of `len` copies of `value`, charged to the budget.
+    pub fn filled<T: Copy>(&mut self, len: usize, value: T, what: &'static str) -> Result<Vec<T>, BuildError> {
+        let mut v = self.vec(len, what)?;
+        v.resize(len, value);
+        Ok(v)
+    }
+
+    /// Releases a temporary vector charged with [`MemoryBudget::vec`] and drops it.
+    pub fn free<T>(&mut self, v: Vec<T>) {
+        self.release(v.capacity() * core::mem::size_of::<T>());
+    }
+}
+
+/// Bytes a vector holds (its capacity), for memory reports.
+pub fn bytes_of<T>(v: &Vec<T>) -> usize {
+    v.capacity() * core::mem::size_of::<T>()
+}
+
+/// Moves `value` into a new box, or gives `None` when the allocator refuses (instead of aborting).
+pub fn try_box<T>(value: T) -> Option<alloc::boxed::Box<T>> {
+    let layout = core::alloc::Layout::new::<T>();
+    if layout.size() == 0 {
+        return Some(alloc::boxed::Box::new(value));
+    }
+    // SAFETY: the layout has a non-zero size; on success the memory is initialised with `value` before
+    // `Box::from_raw` takes ownership, and it was allocated by the global allocator with T's layout.
+    unsafe {
+        let p = alloc::alloc::alloc(layout) as *mut T;
+        if p.is_null() {
+            return None;
+        }
+        p.write(value);
+        Some(alloc::boxed::Box::from_raw(p))
+    }
+}

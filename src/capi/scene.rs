@@ -1,0 +1,400 @@
+//! Scene functions of the C ABI.
+
+use core::mem::{offset_of, size_of};
+use core::ptr;
+
+use glam::Vec3;
+
+use super::types::*;
+use super::{boundary, Message};
+use crate::budget::try_box;
+use crate::error::{BuildError, MeshError};
+use crate::mesh::MeshSource;
+use crate::ray::{Hit, Ray};
+use crate::scene::{BuildOptions, Outcome, Scene, Structure};
+use crate::select::calibration::Calibration;
+
+/// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
+/// no error callback. Does nothing when `opts` is NULL.
+///
+/// # Safety
+/// `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
+    boundary(|| {
+        if opts.is_null() {
+            return;
+        }
+        // SAFETY: the caller promises a writable rq_build_options; write_unaligned tolerates any alignment.
+        unsafe {
+            opts.write_unaligned(rq_build_options {
+                struct_size: size_of::<rq_build_options>() as u32,
+                structure: rq_structure::RQ_STRUCTURE_AUTO,
+                expected_rays: 0,
+                sample_rays: ptr::null(),
+                sample_ray_count: 0,
+                memory_limit: 0,
+                on_error: None,
+                user: ptr::null_mut(),
+            })
+        }
+    })
+}
+
+/// Options as read from C, with the defaults for fields the caller's `struct_size` does not cover.
+struct Options {
+    structure: Structure,
+    expected_rays: u64,
+    memory_limit: usize,
+    on_error: rq_error_fn,
+    user: *mut core::ffi::c_void,
+}
+
+/// Reads field `$field` of type `$ty` from `*$p` when `$size` covers it, else keeps `$default`.
+macro_rules! read_covered {
+    ($p:expr, $size:expr, $field:ident, $ty:ty, $default:expr) => {{
+        let end = offset_of!(rq_build_options, $field) + size_of::<$ty>();
+        if $size >= end {
+            // SAFETY: the caller's struct_size says these bytes are part of its options struct.
+            unsafe { ptr::read_unaligned(($p as *const u8).add(offset_of!(rq_build_options, $field)) as *const $ty) }
+        } else {
+            $default
+        }
+    }};
+}
+
+/// Reads the options, never materialising an out-of-range enum.
+///
+/// # Safety
+/// `p` is NULL or points to readable memory of at least `struct_size` bytes (capped at our size).
+unsafe fn read_options(p: *const rq_build_options) -> Result<Options, (rq_status, &'static str, Options)> {
+    let mut o = Options {
+        structure: Structure::Auto,
+        expected_rays: 0,
+        memory_limit: 0,
+        on_error: None,
+        user: ptr::null_mut(),
+    };
+    if p.is_null() {
+        return Ok(o);
+    }
+    // SAFETY: struct_size is the first field and always present.
+    let size = unsafe { ptr::read_unaligned(p as *const u32) } as usize;
+    o.on_error = read_covered!(p, size, on_error, rq_error_fn, None);
+    o.user = read_covered!(p, size, user, *mut core::ffi::c_void, ptr::null_mut());
+    if size < offset_of!(rq_build_options, structure) + size_of::<u32>() {
+        return Err((rq_status::RQ_STATUS_INVALID_ARGUMENT, "rq_build_options.struct_size is too small: call rq_build_options_init", o));
+    }
+    let structure: u32 = read_covered!(p, size, structure, u32, 0);
+    o.structure = match structure {
+        0 => Structure::Auto,
+        1 => Structure::Grid,
+        2 => Structure::KdTree,
+        _ => return Err((rq_status::RQ_STATUS_INVALID_ARGUMENT, "rq_build_options.structure is not an rq_structure value", o)),
+    };
+    o.expected_rays = read_covered!(p, size, expected_rays, u64, 0);
+    o.memory_limit = read_covered!(p, size, memory_limit, usize, 0);
+    let samples: *const rq_ray = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
+    let sample_count: usize = read_covered!(p, size, sample_ray_count, usize, 0);
+    if samples.is_null() && sample_count != 0 {
+        return Err((rq_status::RQ_STATUS_NULL_ARGUMENT, "rq_build_options.sample_rays is NULL but sample_ray_count is not 0", o));
+    }
+    Ok(o)
+}
+
+/// The caller's strided arrays, checked for NULL and address overflow before the first read.
+struct RawMesh {
+    vertices: *const u8,
+    vertex_count: usize,
+    stride: usize,
+    indices: *const u8,
+    triangle_count: usize,
+}
+
+impl RawMesh {
+    /// # Safety
+    /// The descriptor's pointers, when not NULL, must cover the sizes its counts imply.
+    unsafe fn new(d: &rq_mesh_desc) -> Result<RawMesh, MeshError> {
+        if d.vertex_stride < 12 {
+            return Err(MeshError::StrideTooSmall { stride: d.vertex_stride });
+        }
+        let vertex_bytes = match d.vertex_count {
+            0 => Some(0),
+            n => (n - 1).checked_mul(d.vertex_stride).and_then(|b| b.checked_add(12)),
+        };
+        let index_bytes = d.triangle_count.checked_mul(12);
+        let fits = |p: usize, bytes: Option<usize>| {
+            bytes.is_some_and(|b| b <= isize::MAX as usize && p.checked_add(b).is_some())
+        };
+        if !fits(d.vertices as usize, vertex_bytes) {
+            return Err(MeshError::CountOverflow { what: "vertex_count * vertex_stride" });
+        }
+        if !fits(d.indices as usize, index_bytes) {
+            return Err(MeshError::CountOverflow { what: "triangle_count * 12" });
+        }
+        if d.vertex_count != 0 && d.vertices.is_null() {
+            return Err(MeshError::MissingData { what: "rq_mesh_desc.vertices" });
+        }
+        if d.triangle_count != 0 && d.indices.is_null() {
+            return Err(MeshError::MissingData { what: "rq_mesh_desc.indices" });
+        }
+        Ok(RawMesh {
+            vertices: d.vertices as *const u8,
+            vertex_count: d.vertex_count,
+            stride: d.vertex_stride,
+            indices: d.indices as *const u8,
+            triangle_count: d.triangle_count,
+        })
+    }
+}
+
+impl MeshSource for RawMesh {
+    fn vertex_count(&self) -> usize {
+        self.vertex_count
+    }
+    fn triangle_count(&self) -> usize {
+        self.triangle_count
+    }
+    fn vertex(&self, i: usize) -> [f32; 3] {
+        // SAFETY: i < vertex_count and RawMesh::new checked that the range does not overflow; the
+        // caller promised the memory. Unaligned reads accept any pointer alignment.
+        unsafe { ptr::read_unaligned(self.vertices.add(i * self.stride) as *const [f32; 3]) }
+    }
+    fn triangle(&self, i: usize) -> [u32; 3] {
+        // SAFETY: as above, for the index array.
+        unsafe { ptr::read_unaligned(self.indices.add(i * 12) as *const [u32; 3]) }
+    }
+}
+
+fn report_error(o: &Options, status: rq_status, message: &Message) -> rq_status {
+    if let Some(cb) = o.on_error {
+        // SAFETY: the caller gave this callback and user pointer for exactly this purpose.
+        unsafe { cb(o.user, status, message.as_ptr()) };
+    }
+    status
+}
+
+/// Validates the mesh and builds a scene; `opts` NULL means defaults, `calib` NULL the built-in
+/// calibration. On success `*out` receives the scene; on failure `*out` is untouched and `on_error`
+/// (if set) is told why.
+///
+/// # Safety
+/// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_build(
+    mesh: *const rq_mesh_desc,
+    opts: *const rq_build_options,
+    calib: *const rq_calibration,
+    out: *mut *mut rq_scene,
+) -> rq_status {
+    boundary(|| {
+        // SAFETY: opts is NULL or a readable options struct (function contract).
+        let o = match unsafe { read_options(opts) } {
+            Ok(o) => o,
+            Err((status, text, o)) => return report_error(&o, status, &Message::new(format_args!("{text}"))),
+        };
+        if mesh.is_null() || out.is_null() {
+            let text = if mesh.is_null() { "mesh is NULL" } else { "out is NULL" };
+            return report_error(&o, rq_status::RQ_STATUS_NULL_ARGUMENT, &Message::new(format_args!("{text}")));
+        }
+        // SAFETY: mesh is not NULL and points to a descriptor (contract).
+        let desc = unsafe { ptr::read_unaligned(mesh) };
+        // SAFETY: the descriptor's arrays cover its counts (contract).
+        let raw = match unsafe { RawMesh::new(&desc) } {
+            Ok(r) => r,
+            Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
+        };
+        let calibration: &Calibration = if calib.is_null() {
+            Calibration::builtin()
+        } else {
+            // SAFETY: non-NULL calibration handles come from rq_calibration_* and point to a Calibration.
+            unsafe { &*(calib as *const Calibration) }
+        };
+        let options = BuildOptions {
+            structure: o.structure,
+            expected_rays: o.expected_rays,
+            memory_limit: o.memory_limit,
+            ..BuildOptions::DEFAULT
+        };
+        let scene = match Scene::build(&raw, &options, calibration) {
+            Ok(s) => s,
+            Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
+        };
+        let Some(boxed) = try_box(scene) else {
+            let e = BuildError::OutOfMemory { what: "scene handle", bytes: size_of::<Scene>() };
+            return report_error(&o, e.into(), &Message::new(format_args!("{e}")));
+        };
+        // SAFETY: out is not NULL (checked) and writable (contract).
+        unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(boxed) as *mut rq_scene) };
+        rq_status::RQ_STATUS_OK
+    })
+}
+
+/// Frees a scene; NULL is ignored.
+///
+/// # Safety
+/// `scene` is NULL or came from `rq_scene_build` and is not used afterwards.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_free(scene: *mut rq_scene) {
+    boundary(|| {
+        if !scene.is_null() {
+            // SAFETY: the handle is a Box<Scene> made by rq_scene_build (contract).
+            drop(unsafe { alloc::boxed::Box::from_raw(scene as *mut Scene) });
+        }
+    })
+}
+
+/// # Safety
+/// `scene` is NULL or a live handle.
+unsafe fn scene_ref<'a>(scene: *const rq_scene) -> Option<&'a Scene> {
+    // SAFETY: a non-NULL handle is a live Box<Scene> (contract).
+    unsafe { (scene as *const Scene).as_ref() }
+}
+
+fn to_ray(r: &rq_ray) -> Ray {
+    Ray { org: Vec3::from(r.org), tmin: r.tmin, dir: Vec3::from(r.dir), tmax: r.tmax }
+}
+
+fn to_hit(h: Hit) -> rq_hit {
+    rq_hit { t: h.t, u: h.u, v: h.v, prim: h.prim }
+}
+
+/// The closest hit of `ray`: true on a hit. `*out` is always written when not NULL (a miss as
+/// `t = INFINITY, u = v = 0, prim = RQ_INVALID_ID`); a NULL scene or ray is a miss.
+///
+/// # Safety
+/// `scene` is NULL or a live handle; `ray` NULL or readable; `out` NULL or writable.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_intersect(scene: *const rq_scene, ray: *const rq_ray, out: *mut rq_hit) -> bool {
+    boundary(|| {
+        // SAFETY: per the function contract.
+        let hit = match (unsafe { scene_ref(scene) }, ray.is_null()) {
+            (Some(s), false) => s.intersect(&to_ray(&unsafe { ptr::read_unaligned(ray) })),
+            _ => Hit::MISS,
+        };
+        if !out.is_null() {
+            // SAFETY: out is writable (contract).
+            unsafe { out.write_unaligned(to_hit(hit)) };
+        }
+        hit.is_hit()
+    })
+}
+
+/// True when anything blocks `ray` in `[tmin, tmax]`; a NULL scene or ray is not occluded.
+///
+/// # Safety
+/// `scene` is NULL or a live handle; `ray` NULL or readable.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_occluded(scene: *const rq_scene, ray: *const rq_ray) -> bool {
+    boundary(|| match (unsafe { scene_ref(scene) }, ray.is_null()) {
+        // SAFETY: ray is not NULL and readable (contract).
+        (Some(s), false) => s.occluded(&to_ray(&unsafe { ptr::read_unaligned(ray) })),
+        _ => false,
+    })
+}
+
+/// Closest hits of `n` rays into `hits[0..n]` (the two arrays must not overlap). `n == 0` is a no-op.
+///
+/// # Safety
+/// `rays` readable and `hits` writable for `n` elements when `n > 0`.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_intersect_n(scene: *const rq_scene, rays: *const rq_ray, hits: *mut rq_hit, n: usize) -> rq_status {
+    boundary(|| {
+        // SAFETY: per the function contract.
+        let Some(s) = (unsafe { scene_ref(scene) }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        if n == 0 {
+            return rq_status::RQ_STATUS_OK;
+        }
+        if rays.is_null() || hits.is_null() {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        }
+        for i in 0..n {
+            // SAFETY: i < n and the arrays hold n elements (contract).
+            unsafe {
+                let r = ptr::read_unaligned(rays.add(i));
+                hits.add(i).write_unaligned(to_hit(s.intersect(&to_ray(&r))));
+            }
+        }
+        rq_status::RQ_STATUS_OK
+    })
+}
+
+fn c_structure(s: Structure) -> rq_structure {
+    match s {
+        Structure::Auto => rq_structure::RQ_STRUCTURE_AUTO,
+        Structure::Grid => rq_structure::RQ_STRUCTURE_GRID,
+        Structure::KdTree => rq_structure::RQ_STRUCTURE_KDTREE,
+    }
+}
+
+fn c_outcome(o: Outcome) -> rq_outcome {
+    match o {
+        Outcome::Forced => rq_outcome::RQ_OUTCOME_FORCED,
+        Outcome::GridFasterPerRay => rq_outcome::RQ_OUTCOME_GRID_FASTER_PER_RAY,
+        Outcome::BelowBreakEven => rq_outcome::RQ_OUTCOME_BELOW_BREAK_EVEN,
+        Outcome::AboveBreakEven => rq_outcome::RQ_OUTCOME_ABOVE_BREAK_EVEN,
+        Outcome::OnlineOnGrid => rq_outcome::RQ_OUTCOME_ONLINE_ON_GRID,
+        Outcome::OnlineSwitched => rq_outcome::RQ_OUTCOME_ONLINE_SWITCHED,
+    }
+}
+
+/// Writes `$value` into field `$field` of `*$p` when `$size` covers the whole field.
+macro_rules! write_covered {
+    ($p:expr, $size:expr, $field:ident, $value:expr) => {{
+        let value = $value;
+        let at = offset_of!(rq_scene_report, $field);
+        if $size >= at + core::mem::size_of_val(&value) {
+            // SAFETY: the caller's struct_size says these bytes belong to its report struct.
+            unsafe { ptr::write_unaligned(($p as *mut u8).add(at) as *mut _, value) };
+        }
+    }};
+}
+
+/// Fills the fields of `*out` that `out->struct_size` covers (struct_size itself is left alone).
+///
+/// # Safety
+/// `scene` is NULL or a live handle; `out` NULL or writable for `out->struct_size` bytes.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_report_get(scene: *const rq_scene, out: *mut rq_scene_report) -> rq_status {
+    boundary(|| {
+        // SAFETY: per the function contract.
+        let Some(s) = (unsafe { scene_ref(scene) }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        if out.is_null() {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        }
+        // SAFETY: out is readable (contract); struct_size is its first field.
+        let size = unsafe { ptr::read_unaligned(out as *const u32) } as usize;
+        if size < size_of::<u32>() * 2 {
+            return rq_status::RQ_STATUS_INVALID_ARGUMENT;
+        }
+        let r = s.report();
+        write_covered!(out, size, structure, c_structure(r.structure));
+        write_covered!(out, size, outcome, c_outcome(r.outcome));
+        write_covered!(out, size, triangle_count, r.triangle_count);
+        write_covered!(out, size, memory_bytes, r.memory_bytes);
+        write_covered!(out, size, grid_resolution, r.grid_resolution);
+        write_covered!(out, size, grid_ray_seconds, r.grid_ray_seconds);
+        write_covered!(out, size, kd_ray_seconds, r.kd_ray_seconds);
+        write_covered!(out, size, kd_build_seconds, r.kd_build_seconds);
+        write_covered!(out, size, break_even_rays, r.break_even_rays);
+        write_covered!(out, size, expected_rays, r.expected_rays);
+        write_covered!(out, size, references_per_triangle, r.references_per_triangle);
+        rq_status::RQ_STATUS_OK
+    })
+}
+
+/// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown).
+/// Call between batches, never concurrently with queries. Until the kd-tree exists there is nothing to
+/// switch to, so the scene stays on the grid.
+///
+/// # Safety
+/// `scene` is NULL or a live handle not being queried by another thread.
+#[no_mangle]
+pub unsafe extern "C" fn rq_scene_update(scene: *mut rq_scene, rays_traced: u64, rays_remaining: u64) -> rq_status {
+    boundary(|| {
+        // SAFETY: a non-NULL handle is a live Box<Scene> with no concurrent users (contract).
+        let Some(s) = (unsafe { (scene as *mut Scene).as_mut() }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        s.update(rays_traced, rays_remaining);
+        rq_status::RQ_STATUS_OK
+    })
+}

@@ -1,0 +1,184 @@
+//! C-visible types. Every enum has explicit numbers that never change; every struct is `repr(C)`.
+
+use core::ffi::{c_char, c_void};
+
+/// Status of every fallible call (`uint32_t`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_status {
+    /// Success.
+    RQ_STATUS_OK = 0,
+    /// A required pointer is NULL.
+    RQ_STATUS_NULL_ARGUMENT = 1,
+    /// An argument (an enum value, a size, an option) is out of range.
+    RQ_STATUS_INVALID_ARGUMENT = 2,
+    /// The mesh is refused: non-finite vertex, index out of range, stride below 12, counts overflow.
+    RQ_STATUS_INVALID_MESH = 3,
+    /// The caller's ABI version does not match the library's.
+    RQ_STATUS_ABI_MISMATCH = 4,
+    /// The call is not valid in the current state.
+    RQ_STATUS_INVALID_OPERATION = 5,
+    /// Not supported by this build.
+    RQ_STATUS_UNSUPPORTED = 6,
+    /// The allocator refused memory.
+    RQ_STATUS_OUT_OF_MEMORY = 100,
+    /// The build would exceed `memory_limit`.
+    RQ_STATUS_MEMORY_LIMIT = 101,
+    /// A callback cancelled the build.
+    RQ_STATUS_CANCELLED = 102,
+    /// Calibration blob: bad magic.
+    RQ_STATUS_CALIB_BAD_MAGIC = 200,
+    /// Calibration blob: unknown major format version.
+    RQ_STATUS_CALIB_UNSUPPORTED_VERSION = 201,
+    /// Calibration blob: shorter or longer than its header declares.
+    RQ_STATUS_CALIB_TRUNCATED = 202,
+    /// Calibration blob: CRC-32 mismatch.
+    RQ_STATUS_CALIB_CHECKSUM = 203,
+    /// Calibration blob: a constant is not finite or out of range.
+    RQ_STATUS_CALIB_VALUE_OUT_OF_RANGE = 204,
+    /// A panic was caught at the boundary (a bug in rayq).
+    RQ_STATUS_PANIC = 900,
+    /// An internal invariant failed (a bug in rayq).
+    RQ_STATUS_INTERNAL = 901,
+}
+
+/// Which acceleration structure (`uint32_t`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_structure {
+    /// Let the selector decide (default).
+    RQ_STRUCTURE_AUTO = 0,
+    /// Uniform grid.
+    RQ_STRUCTURE_GRID = 1,
+    /// SAH kd-tree.
+    RQ_STRUCTURE_KDTREE = 2,
+}
+
+/// Why the scene uses its structure (`uint32_t`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_outcome {
+    /// The caller chose the structure (or only one was available).
+    RQ_OUTCOME_FORCED = 0,
+    /// `t_grid <= t_kd`: the kd-tree never pays.
+    RQ_OUTCOME_GRID_FASTER_PER_RAY = 1,
+    /// Expected rays < W*: kept the grid.
+    RQ_OUTCOME_BELOW_BREAK_EVEN = 2,
+    /// Expected rays >= W*: built the kd-tree.
+    RQ_OUTCOME_ABOVE_BREAK_EVEN = 3,
+    /// Budget unknown, still on the grid.
+    RQ_OUTCOME_ONLINE_ON_GRID = 4,
+    /// Budget unknown, switched to the kd-tree.
+    RQ_OUTCOME_ONLINE_SWITCHED = 5,
+}
+
+/// A ray `org + t*dir`, `tmin <= t <= tmax` (32 bytes). `dir` need not be normalized.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_ray {
+    /// Origin.
+    pub org: [f32; 3],
+    /// Smallest accepted t.
+    pub tmin: f32,
+    /// Direction.
+    pub dir: [f32; 3],
+    /// Largest accepted t (may be INFINITY).
+    pub tmax: f32,
+}
+
+/// A hit (16 bytes). Miss: `t = +INFINITY, u = v = 0, prim = RQ_INVALID_ID`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_hit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+    /// Triangle index, or `RQ_INVALID_ID`.
+    pub prim: u32,
+}
+
+/// An indexed triangle mesh in the caller's memory. The build copies what it needs.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_mesh_desc {
+    /// Vertex data: xyz (three floats) at the start of each `vertex_stride`-byte record. Need not be
+    /// aligned.
+    pub vertices: *const f32,
+    /// Number of vertices.
+    pub vertex_count: usize,
+    /// Bytes from one vertex to the next (at least 12).
+    pub vertex_stride: usize,
+    /// Three vertex indices per triangle. Need not be aligned.
+    pub indices: *const u32,
+    /// Number of triangles.
+    pub triangle_count: usize,
+}
+
+/// Error callback: told the status and a NUL-terminated message that lives only during the call.
+pub type rq_error_fn = Option<unsafe extern "C" fn(user: *mut c_void, status: rq_status, message: *const c_char)>;
+
+/// Build options. Fill with `rq_build_options_init`, then change what you need. The library reads
+/// only the fields that `struct_size` covers, so a program built against an older header keeps working.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_build_options {
+    /// `sizeof(rq_build_options)` as the caller knows it.
+    pub struct_size: u32,
+    /// AUTO (default), GRID or KDTREE.
+    pub structure: rq_structure,
+    /// Rays the caller expects to trace; 0 = unknown (start on the grid, see `rq_scene_update`).
+    pub expected_rays: u64,
+    /// Representative rays for the selector; NULL = the library makes some.
+    pub sample_rays: *const rq_ray,
+    /// Number of sample rays.
+    pub sample_ray_count: usize,
+    /// Memory limit in bytes for everything the scene holds; 0 = none.
+    pub memory_limit: usize,
+    /// Called once with the status and a message when the build fails; may be NULL.
+    pub on_error: rq_error_fn,
+    /// Passed to `on_error`.
+    pub user: *mut c_void,
+}
+
+/// What a scene reports. Set `struct_size`; the library writes only the fields it covers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_scene_report {
+    /// `sizeof(rq_scene_report)` as the caller knows it.
+    pub struct_size: u32,
+    /// The structure in use now: GRID or KDTREE.
+    pub structure: rq_structure,
+    /// Why.
+    pub outcome: rq_outcome,
+    /// Triangles in the mesh (degenerate ones included).
+    pub triangle_count: usize,
+    /// Bytes the scene holds.
+    pub memory_bytes: usize,
+    /// Grid cells per axis (0 when no grid is held).
+    pub grid_resolution: [u32; 3],
+    /// Estimated seconds per ray on the grid (NaN when not estimated).
+    pub grid_ray_seconds: f64,
+    /// Estimated seconds per ray on the kd-tree (NaN when not estimated).
+    pub kd_ray_seconds: f64,
+    /// Estimated kd-tree build time (NaN when not estimated).
+    pub kd_build_seconds: f64,
+    /// Estimated W*; +INFINITY when the kd-tree is not faster per ray; NaN when not estimated.
+    pub break_even_rays: f64,
+    /// The ray budget the scene was built for (0 = unknown).
+    pub expected_rays: u64,
+    /// Triangle references per non-degenerate triangle in the structure in use.
+    pub references_per_triangle: f64,
+}
+
+/// An immutable scene (opaque). Free with `rq_scene_free`.
+pub struct rq_scene {
+    _private: [u8; 0],
+}
+
+/// Machine cost constants (opaque, immutable, shareable between threads).
+pub struct rq_calibration {
+    _private: [u8; 0],
+}

@@ -1,0 +1,42 @@
+//! rayq: a ray query core for triangle meshes.
+//!
+//! It builds a uniform grid in linear time (and, later, a SAH kd-tree), answers closest-hit and any-hit
+//! queries with one watertight triangle test shared by every structure, and is exported to C through
+//! `include/rayq.h` (feature `capi`). The core is `no_std` + `alloc`: every allocation during a build is
+//! fallible and counted against an optional memory limit, and queries never allocate.
+//!
+//! Start with [`Scene::build`], or with [`UniformGrid::build`] when you want one structure directly.
+#![no_std]
+#![warn(missing_docs)]
+
+#[cfg(not(any(feature = "std", feature = "libm")))]
+compile_error!("rayq needs float math: enable feature `std` (default) or feature `libm`");
+
+extern crate alloc;
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod accel;
+pub mod budget;
+pub mod error;
+mod math;
+pub mod mesh;
+pub mod procedural;
+pub mod ray;
+pub mod scene;
+pub mod select;
+
+#[cfg(feature = "capi")]
+pub mod capi;
+#[cfg(feature = "obj")]
+pub mod obj;
+
+pub use accel::brute::BruteForce;
+pub use accel::grid::{GridParams, UniformGrid};
+pub use accel::{Aabb, RayQuery};
+pub use budget::MemoryBudget;
+pub use error::{BuildError, CalibError, MeshError};
+pub use mesh::TriMesh;
+pub use ray::{Hit, Ray};
+pub use scene::{BuildOptions, Scene, Structure};
+pub use select::calibration::Calibration;

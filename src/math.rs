@@ -1,0 +1,60 @@
+//! The one place float functions come from: std when it is there, libm otherwise.
+
+#[cfg(feature = "std")]
+mod imp {
+    #[inline(always)]
+    pub fn floor(x: f32) -> f32 {
+        x.floor()
+    }
+    #[inline(always)]
+    pub fn sqrt(x: f32) -> f32 {
+        x.sqrt()
+    }
+    #[inline(always)]
+    pub fn cbrt(x: f64) -> f64 {
+        x.cbrt()
+    }
+    #[inline(always)]
+    pub fn sqrt64(x: f64) -> f64 {
+        x.sqrt()
+    }
+    #[inline(always)]
+    pub fn sin(x: f32) -> f32 {
+        x.sin()
+    }
+    #[inline(always)]
+    pub fn cos(x: f32) -> f32 {
+        x.cos()
+    }
+}
+
+#[cfg(not(feature = "std"))]
+mod imp {
+    #[inline(always)]
+    pub fn floor(x: f32) -> f32 {
+        libm::floorf(x)
+    }
+    #[inline(always)]
+    pub fn sqrt(x: f32) -> f32 {
+        libm::sqrtf(x)
+    }
+    #[inline(always)]
+    pub fn cbrt(x: f64) -> f64 {
+        libm::cbrt(x)
+    }
+    #[inline(always)]
+    pub fn sqrt64(x: f64) -> f64 {
+        libm::sqrt(x)
+    }
+    #[inline(always)]
+    pub fn sin(x: f32) -> f32 {
+        libm::sinf(x)
+    }
+    #[inline(always)]
+    pub fn cos(x: f32) -> f32 {
+        libm::cosf(x)
+    }
+}
+
+#[allow(unused_imports)]
+pub use imp::*;

@@ -1,0 +1,287 @@
+//! The machine's cost constants and their binary blob (format in README.md, "Calibration blob").
+
+use crate::error::CalibError;
+
+/// One constant of the calibration: its name, its documented range, and what it means.
+#[derive(Clone, Copy, Debug)]
+pub struct Constant {
+    /// Name used in messages and in the README's table.
+    pub name: &'static str,
+    /// Smallest accepted value.
+    pub min: f64,
+    /// Largest accepted value.
+    pub max: f64,
+    /// What it measures.
+    pub meaning: &'static str,
+}
+
+/// The constants in blob order. Appending is a minor format change; anything else is a major one.
+pub const CONSTANTS: [Constant; 8] = [
+    Constant { name: "grid_build_ns_per_triangle", min: 0.0, max: 1e6, meaning: "grid build time per triangle" },
+    Constant { name: "grid_build_ns_per_reference", min: 0.0, max: 1e6, meaning: "grid build time per cell reference" },
+    Constant { name: "grid_ns_per_cell", min: 0.0, max: 1e6, meaning: "grid traversal time per cell visited" },
+    Constant { name: "grid_ns_per_test", min: 0.0, max: 1e6, meaning: "triangle test time in the grid" },
+    Constant { name: "kd_build_ns_per_nlogn", min: 0.0, max: 1e6, meaning: "kd-tree build time per N·log2 N" },
+    Constant { name: "kd_ns_per_node", min: 0.0, max: 1e6, meaning: "kd-tree traversal time per node visited" },
+    Constant { name: "kd_ns_per_test", min: 0.0, max: 1e6, meaning: "triangle test time in the kd-tree" },
+    Constant { name: "kd_ns_per_ray", min: 0.0, max: 1e6, meaning: "fixed kd-tree cost per ray" },
+];
+
+/// Number of constants in this layout.
+pub const CONSTANT_COUNT: usize = CONSTANTS.len();
+
+/// Machine constants for the cost model.
+///
+/// Guarantees: every value is finite and inside its [`CONSTANTS`] range (the only ways to make one are
+/// [`Calibration::new`] and [`Calibration::from_bytes`], which check).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Calibration {
+    machine: u64,
+    build: u64,
+    values: [f64; CONSTANT_COUNT],
+}
+
+/// Blob magic: the first eight bytes of every calibration blob.
+pub const MAGIC: [u8; 8] = *b"RQCALIB\0";
+/// Major format version this reader understands.
+pub const FORMAT_MAJOR: u16 = 1;
+/// Minor format version this writer produces.
+pub const FORMAT_MINOR: u16 = 0;
+/// Bytes before the payload.
+pub const HEADER_LEN: usize = 32;
+/// Bytes of the trailing CRC-32.
+pub const CRC_LEN: usize = 4;
+/// Size of the blob this version writes.
+pub const BLOB_LEN: usize = HEADER_LEN + 4 + 8 * CONSTANT_COUNT + CRC_LEN;
+
+/// Fingerprint of the code that wrote a blob: FNV-1a of the crate version, mixed with the target
+/// architecture's.
+pub const BUILD_FINGERPRINT: u64 =
+    fnv1a(env!("CARGO_PKG_VERSION").as_bytes()) ^ fnv1a(TARGET_ARCH.as_bytes()).rotate_left(17);
+
+#[cfg(target_arch = "x86_64")]
+const TARGET_ARCH: &str = "x86_64";
+#[cfg(target_arch = "aarch64")]
+const TARGET_ARCH: &str = "aarch64";
+#[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+const TARGET_ARCH: &str = "other";
+
+/// The calibration compiled into the library. Provisional values until the calibration issue fits
+/// them on the reference machine; `calib/default.rqcal` holds the same values as a blob (a test keeps
+/// the two identical).
+pub const BUILTIN: Calibration = Calibration {
+    machine: 0,
+    build: 0,
+    values: [5.0, 2.0, 3.0, 4.0, 10.0, 2.0, 4.0, 10.0],
+};
+
+impl Calibration {
+    /// A calibration from values in [`CONSTANTS`] order, refused when any is out of range.
+    pub fn new(machine: u64, values: [f64; CONSTANT_COUNT]) -> Result<Calibration, CalibError> {
+        check_values(&values)?;
+        Ok(Calibration { machine, build: BUILD_FINGERPRINT, values })
+    }
+
+    /// The built-in calibration.
+    pub const fn builtin() -> &'static Calibration {
+        &BUILTIN
+    }
+
+    /// The value of constant `i` in [`CONSTANTS`] order.
+    pub fn value(&self, i: usize) -> f64 {
+        self.values.get(i).copied().unwrap_or(0.0)
+    }
+
+    /// All values in [`CONSTANTS`] order.
+    pub fn values(&self) -> &[f64; CONSTANT_COUNT] {
+        &self.values
+    }
+
+    /// Fingerprint of the machine that produced it (0 = not tied to a machine).
+    pub fn machine_fingerprint(&self) -> u64 {
+        self.machine
+    }
+
+    /// Fingerprint of the build that produced it.
+    pub fn build_fingerprint(&self) -> u64 {
+        self.build
+    }
+
+    /// Writes the blob into `buf`, returning its length ([`BLOB_LEN`]).
+    pub fn to_bytes(&self, buf: &mut [u8]) -> Result<usize, CalibError> {
+        let out = buf.get_mut(..BLOB_LEN).ok_or(CalibError::BufferTooSmall { needed: BLOB_LEN })?;
+        out[0..8].copy_from_slice(&MAGIC);
+        out[8..10].copy_from_slice(&FORMAT_MAJOR.to_le_bytes());
+        out[10..12].copy_from_slice(&FORMAT_MINOR.to_le_bytes());
+        let payload_len = (BLOB_LEN - HEADER_LEN - CRC_LEN) as u32;
+        out[12..16].copy_from_slice(&payload_len.to_le_bytes());
+        out[16..24].copy_from_slice(&self.machine.to_le_bytes());
+        out[24..32].copy_from_slice(&self.build.to_le_bytes());
+        out[32..36].copy_from_slice(&(CONSTANT_COUNT as u32).to_le_bytes());
+        for (i, v) in self.values.iter().enumerate() {
+            let at = 36 + 8 * i;
+            out[at..at + 8].copy_from_slice(&v.to_le_bytes());
+        }
+        let crc = crc32(&out[..BLOB_LEN - CRC_LEN]);
+        out[BLOB_LEN - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
+        Ok(BLOB_LEN)
+    }
+
+    /// Reads a blob, checking magic, version, length, CRC and every value before a calibration
+    /// exists. Constants appended by a newer minor version are ignored.
+    pub fn from_bytes(data: &[u8]) -> Result<Calibration, CalibError> {
+        let truncated = |expected: usize| CalibError::Truncated { expected, got: data.len() };
+        let magic = data.get(0..8).ok_or(truncated(HEADER_LEN + CRC_LEN))?;
+        if magic != MAGIC {
+            return Err(CalibError::BadMagic);
+        }
+        let header = data.get(..HEADER_LEN).ok_or(truncated(HEADER_LEN + CRC_LEN))?;
+        let major = u16::from_le_bytes([header[8], header[9]]);
+        if major != FORMAT_MAJOR {
+            return Err(CalibError::UnsupportedVersion { major });
+        }
+        let payload_len = u32::from_le_bytes([header[12], header[13], header[14], header[15]]) as usize;
+        let total = HEADER_LEN
+            .checked_add(payload_len)
+            .and_then(|n| n.checked_add(CRC_LEN))
+            .ok_or(truncated(usize::MAX))?;
+        if data.len() != total {
+            return Err(truncated(total));
+        }
+        let (body, crc_bytes) = data.split_at(total - CRC_LEN);
+        let crc = u32::from_le_bytes([crc_bytes[0], crc_bytes[1], crc_bytes[2], crc_bytes[3]]);
+        if crc32(body) != crc {
+            return Err(CalibError::Checksum);
+        }
+        let payload = &body[HEADER_LEN..];
+        let count = payload.get(0..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+        let known = 4 + 8 * CONSTANT_COUNT;
+        match count {
+            Some(c) if c >= CONSTANT_COUNT && payload.len() >= known && (c - CONSTANT_COUNT) <= (payload.len() - known) / 8 => {}
+            _ => return Err(truncated(HEADER_LEN + known + CRC_LEN)),
+        }
+        let mut values = [0.0; CONSTANT_COUNT];
+        for (i, v) in values.iter_mut().enumerate() {
+            let at = 4 + 8 * i;
+            let mut b = [0u8; 8];
+            b.copy_from_slice(&payload[at..at + 8]);
+            *v = f64::from_le_bytes(b);
+        }
+        check_values(&values)?;
+        let machine = u64::from_le_bytes(header[16..24].try_into().map_err(|_| truncated(HEADER_LEN))?);
+        let build = u64::from_le_bytes(header[24..32].try_into().map_err(|_| truncated(HEADER_LEN))?);
+        Ok(Calibration { machine, build, values })
+    }
+}
+
+impl Default for Calibration {
+    fn default() -> Self {
+        BUILTIN
+    }
+}
+
+fn check_values(values: &[f64; CONSTANT_COUNT]) -> Result<(), CalibError> {
+    for (v, c) in values.iter().zip(CONSTANTS.iter()) {
+        if !(v.is_finite() && *v >= c.min && *v <= c.max) {
+            return Err(CalibError::ValueOutOfRange { field: c.name });
+        }
+    }
+    Ok(())
+}
+
+/// CRC-32 (IEEE 802.3, reflected, polynomial 0xEDB88320), the checksum of zlib and PNG.
+pub fn crc32(data: &[u8]) -> u32 {
+    let mut crc = !0u32;
+    for &b in data {
+        crc = CRC_TABLE[((crc ^ u32::from(b)) & 0xFF) as usize] ^ (crc >> 8);
+    }
+    !crc
+}
+
+const CRC_TABLE: [u32; 256] = {
+    let mut table = [0u32; 256];
+    let mut i = 0;
+    while i < 256 {
+        let mut c = i as u32;
+        let mut k = 0;
+        while k < 8 {
+            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            k += 1;
+        }
+        table[i] = c;
+        i += 1;
+    }
+    table
+};
+
+const fn fnv1a(bytes: &[u8]) -> u64 {
+    let mut h = 0xcbf2_9ce4_8422_2325u64;
+    let mut i = 0;
+    while i < bytes.len() {
+        h ^= bytes[i] as u64;
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        i += 1;
+    }
+    h
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn crc32_matches_the_standard_check_value() {
+        assert_eq!(crc32(b"123456789"), 0xCBF4_3926);
+    }
+
+    #[test]
+    fn round_trip() {
+        let mut buf = [0u8; BLOB_LEN];
+        let c = Calibration::new(42, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0]).unwrap();
+        assert_eq!(c.to_bytes(&mut buf), Ok(BLOB_LEN));
+        assert_eq!(Calibration::from_bytes(&buf), Ok(c));
+    }
+
+    #[test]
+    fn every_truncation_and_every_flip_is_refused() {
+        let mut buf = [0u8; BLOB_LEN];
+        BUILTIN.to_bytes(&mut buf).unwrap();
+        for len in 0..BLOB_LEN {
+            assert!(Calibration::from_bytes(&buf[..len]).is_err(), "length {len} accepted");
+        }
+        for i in 0..BLOB_LEN {
+            for bit in 0..8 {
+                let mut b = buf;
+                b[i] ^= 1 << bit;
+                assert!(Calibration::from_bytes(&b).is_err(), "flip of bit {bit} in byte {i} accepted");
+            }
+        }
+    }
+
+    #[test]
+    fn out_of_range_values_are_refused_even_with_a_good_crc() {
+        for bad in [f64::NAN, f64::INFINITY, -1.0, 1e300] {
+            let mut c = BUILTIN;
+            c.values[3] = bad;
+            let mut buf = [0u8; BLOB_LEN];
+            c.to_bytes(&mut buf).unwrap();
+            assert_eq!(Calibration::from_bytes(&buf), Err(CalibError::ValueOutOfRange { field: CONSTANTS[3].name }));
+        }
+    }
+
+    #[test]
+    fn newer_minor_layout_with_appended_constants_is_read() {
+        let mut buf = [0u8; BLOB_LEN + 8];
+        BUILTIN.to_bytes(&mut buf).unwrap();
+        // Rewrite as a newer minor with one more constant.
+        buf[10..12].copy_from_slice(&1u16.to_le_bytes());
+        let payload_len = (BLOB_LEN + 8 - HEADER_LEN - CRC_LEN) as u32;
+        buf[12..16].copy_from_slice(&payload_len.to_le_bytes());
+        buf[32..36].copy_from_slice(&((CONSTANT_COUNT + 1) as u32).to_le_bytes());
+        let end = BLOB_LEN + 8 - CRC_LEN;
+        buf[end - 8..end].copy_from_slice(&123.0f64.to_le_bytes());
+        let crc = crc32(&buf[..end]);
+        buf[end..].copy_from_slice(&crc.to_le_bytes());
+        assert_eq!(Calibration::from_bytes(&buf).map(|c| c.values), Ok(BUILTIN.values));
+    }
+}

@@ -1,0 +1,4 @@
+//! Choosing the structure: the calibration (machine constants) and, later, the cost model and the
+//! decision rule.
+
+pub mod calibration;
