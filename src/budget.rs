@@ -19,7 +19,11 @@ pub struct MemoryBudget {
 impl MemoryBudget {
     /// A budget with a limit in bytes; 0 means no limit.
     pub const fn new(limit: usize) -> Self {
-        MemoryBudget { limit, used: 0, peak: 0 }
+        MemoryBudget {
+            limit,
+            used: 0,
+            peak: 0,
+        }
     }
 
     /// Bytes currently held.
@@ -39,9 +43,16 @@ impl MemoryBudget {
 
     /// Accounts for `bytes` more, or says why not.
     pub fn charge(&mut self, bytes: usize, what: &'static str) -> Result<(), BuildError> {
-        let needed = self.used.checked_add(bytes).ok_or(BuildError::OutOfMemory { what, bytes })?;
+        let needed = self
+            .used
+            .checked_add(bytes)
+            .ok_or(BuildError::OutOfMemory { what, bytes })?;
         if self.limit != 0 && needed > self.limit {
-            return Err(BuildError::MemoryLimit { what, needed, limit: self.limit });
+            return Err(BuildError::MemoryLimit {
+                what,
+                needed,
+                limit: self.limit,
+            });
         }
         self.used = needed;
         self.peak = self.peak.max(needed);
@@ -57,7 +68,10 @@ impl MemoryBudget {
     pub fn vec<T>(&mut self, len: usize, what: &'static str) -> Result<Vec<T>, BuildError> {
         let bytes = len
             .checked_mul(core::mem::size_of::<T>())
-            .ok_or(BuildError::OutOfMemory { what, bytes: usize::MAX })?;
+            .ok_or(BuildError::OutOfMemory {
+                what,
+                bytes: usize::MAX,
+            })?;
         self.charge(bytes, what)?;
         let mut v = Vec::new();
         if v.try_reserve_exact(len).is_err() {
@@ -68,7 +82,12 @@ impl MemoryBudget {
     }
 
     /// A vector of `len` copies of `value`, charged to the budget.
-    pub fn filled<T: Copy>(&mut self, len: usize, value: T, what: &'static str) -> Result<Vec<T>, BuildError> {
+    pub fn filled<T: Copy>(
+        &mut self,
+        len: usize,
+        value: T,
+        what: &'static str,
+    ) -> Result<Vec<T>, BuildError> {
         let mut v = self.vec(len, what)?;
         v.resize(len, value);
         Ok(v)

@@ -122,12 +122,18 @@ impl fmt::Display for MeshError {
             MeshError::NonFiniteVertex { vertex } => {
                 write!(f, "vertex {vertex} has a NaN or infinite coordinate")
             }
-            MeshError::IndexOutOfRange { triangle, index, vertex_count } => write!(
+            MeshError::IndexOutOfRange {
+                triangle,
+                index,
+                vertex_count,
+            } => write!(
                 f,
                 "triangle {triangle} names vertex {index} but the mesh has {vertex_count} vertices"
             ),
             MeshError::CountOverflow { what } => write!(f, "{what} is too large"),
-            MeshError::MissingData { what } => write!(f, "{what} is NULL but its count is not zero"),
+            MeshError::MissingData { what } => {
+                write!(f, "{what} is NULL but its count is not zero")
+            }
         }
     }
 }
@@ -155,17 +161,29 @@ impl fmt::Display for CalibError {
         match *self {
             CalibError::BadMagic => write!(f, "not a rayq calibration blob (bad magic)"),
             CalibError::UnsupportedVersion { major } => {
-                write!(f, "calibration format major version {major} is not supported")
+                write!(
+                    f,
+                    "calibration format major version {major} is not supported"
+                )
             }
             CalibError::Truncated { expected, got } => {
-                write!(f, "calibration blob has {got} bytes, its header declares {expected}")
+                write!(
+                    f,
+                    "calibration blob has {got} bytes, its header declares {expected}"
+                )
             }
             CalibError::Checksum => write!(f, "calibration blob CRC-32 mismatch"),
             CalibError::ValueOutOfRange { field } => {
-                write!(f, "calibration constant {field} is not finite or out of range")
+                write!(
+                    f,
+                    "calibration constant {field} is not finite or out of range"
+                )
             }
             CalibError::BufferTooSmall { needed } => {
-                write!(f, "buffer too small: the calibration blob needs {needed} bytes")
+                write!(
+                    f,
+                    "buffer too small: the calibration blob needs {needed} bytes"
+                )
             }
         }
     }

@@ -25,6 +25,7 @@ pub mod procedural;
 pub mod ray;
 pub mod scene;
 pub mod select;
+pub mod workload;
 
 #[cfg(feature = "capi")]
 pub mod capi;

@@ -19,6 +19,10 @@ mod imp {
         x.sqrt()
     }
     #[inline(always)]
+    pub fn floor64(x: f64) -> f64 {
+        x.floor()
+    }
+    #[inline(always)]
     pub fn sin(x: f32) -> f32 {
         x.sin()
     }
@@ -45,6 +49,10 @@ mod imp {
     #[inline(always)]
     pub fn sqrt64(x: f64) -> f64 {
         libm::sqrt(x)
+    }
+    #[inline(always)]
+    pub fn floor64(x: f64) -> f64 {
+        libm::floor(x)
     }
     #[inline(always)]
     pub fn sin(x: f32) -> f32 {

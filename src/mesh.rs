@@ -67,14 +67,23 @@ impl TriMesh {
     /// Refuses non-finite coordinates (of any vertex, used or not), indices out of range, and
     /// triangle counts that do not fit 32-bit ids. Degenerate triangles (repeated or collinear
     /// vertices) are kept and will never be hit. An empty mesh is valid.
-    pub fn from_source(src: &impl MeshSource, budget: &mut MemoryBudget) -> Result<TriMesh, BuildError> {
+    pub fn from_source(
+        src: &impl MeshSource,
+        budget: &mut MemoryBudget,
+    ) -> Result<TriMesh, BuildError> {
         let n = src.triangle_count();
         let nv = src.vertex_count();
         if n >= u32::MAX as usize {
-            return Err(MeshError::CountOverflow { what: "triangle count" }.into());
+            return Err(MeshError::CountOverflow {
+                what: "triangle count",
+            }
+            .into());
         }
         if n.checked_mul(core::mem::size_of::<[Vec3; 3]>()).is_none() {
-            return Err(MeshError::CountOverflow { what: "triangle count" }.into());
+            return Err(MeshError::CountOverflow {
+                what: "triangle count",
+            }
+            .into());
         }
         for vi in 0..nv {
             if !Vec3::from(src.vertex(vi)).is_finite() {
@@ -90,7 +99,12 @@ impl TriMesh {
             for (k, &vi) in idx.iter().enumerate() {
                 if vi as usize >= nv {
                     budget.free(tris);
-                    return Err(MeshError::IndexOutOfRange { triangle: i, index: vi, vertex_count: nv }.into());
+                    return Err(MeshError::IndexOutOfRange {
+                        triangle: i,
+                        index: vi,
+                        vertex_count: nv,
+                    }
+                    .into());
                 }
                 tri[k] = Vec3::from(src.vertex(vi as usize));
             }
@@ -101,11 +115,19 @@ impl TriMesh {
             }
             tris.push(tri);
         }
-        Ok(TriMesh { tris, bounds, degenerate })
+        Ok(TriMesh {
+            tris,
+            bounds,
+            degenerate,
+        })
     }
 
     /// Validates and copies an indexed mesh given as Rust slices.
-    pub fn new(vertices: &[[f32; 3]], indices: &[[u32; 3]], budget: &mut MemoryBudget) -> Result<TriMesh, BuildError> {
+    pub fn new(
+        vertices: &[[f32; 3]],
+        indices: &[[u32; 3]],
+        budget: &mut MemoryBudget,
+    ) -> Result<TriMesh, BuildError> {
         TriMesh::from_source(&IndexedMesh { vertices, indices }, budget)
     }
 
@@ -133,7 +155,7 @@ impl TriMesh {
     /// True when triangle `prim` can never be hit (repeated or collinear vertices); structures leave
     /// such triangles out.
     pub fn is_degenerate(&self, prim: u32) -> bool {
-        self.tris.get(prim as usize).is_none_or(is_degenerate)
+        self.tris.get(prim as usize).map_or(true, is_degenerate)
     }
 
     /// How many triangles are degenerate.
@@ -178,7 +200,10 @@ pub struct MeshData {
 impl MeshData {
     /// Borrows the data as a [`MeshSource`].
     pub fn as_source(&self) -> IndexedMesh<'_> {
-        IndexedMesh { vertices: &self.vertices, indices: &self.indices }
+        IndexedMesh {
+            vertices: &self.vertices,
+            indices: &self.indices,
+        }
     }
 
     /// Number of triangles.
@@ -188,6 +213,8 @@ impl MeshData {
 
     /// The box around every vertex ([`Aabb::EMPTY`] when there is none).
     pub fn bounds(&self) -> Aabb {
-        self.vertices.iter().fold(Aabb::EMPTY, |b, &v| b.grow(Vec3::from(v)))
+        self.vertices
+            .iter()
+            .fold(Aabb::EMPTY, |b, &v| b.grow(Vec3::from(v)))
     }
 }

@@ -1,6 +1,6 @@
 //! Rays, hits, and the one watertight ray/triangle test every structure uses.
 
-use glam::Vec3;
+use glam::{DVec3, Vec3};
 
 /// A ray `org + t·dir` restricted to `tmin ≤ t ≤ tmax`. `dir` need not be normalized.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -18,12 +18,22 @@ pub struct Ray {
 impl Ray {
     /// A ray over `[0, ∞]`.
     pub fn new(org: Vec3, dir: Vec3) -> Self {
-        Ray { org, tmin: 0.0, dir, tmax: f32::INFINITY }
+        Ray {
+            org,
+            tmin: 0.0,
+            dir,
+            tmax: f32::INFINITY,
+        }
     }
 
     /// A ray with an explicit `[tmin, tmax]` window.
     pub fn segment(org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Self {
-        Ray { org, tmin, dir, tmax }
+        Ray {
+            org,
+            tmin,
+            dir,
+            tmax,
+        }
     }
 }
 
@@ -47,7 +57,12 @@ impl Hit {
     /// The primitive id of a miss.
     pub const INVALID_ID: u32 = u32::MAX;
     /// What a query returns when nothing is hit.
-    pub const MISS: Hit = Hit { t: f32::INFINITY, u: 0.0, v: 0.0, prim: Hit::INVALID_ID };
+    pub const MISS: Hit = Hit {
+        t: f32::INFINITY,
+        u: 0.0,
+        v: 0.0,
+        prim: Hit::INVALID_ID,
+    };
 
     /// True when this is a hit.
     pub fn is_hit(&self) -> bool {
@@ -88,9 +103,53 @@ pub struct PreparedRay {
     kx: usize,
     ky: usize,
     kz: usize,
-    sx: f32,
-    sy: f32,
-    sz: f32,
+    org64: DVec3,
+    sx: f64,
+    sy: f64,
+    sz: f64,
+}
+
+/// How far, relative to the magnitude of the coordinates, a ray may miss a triangle (measured in the
+/// triangle's plane) and still hit it: 32 ulps of f32, a few times the rounding a caller makes when it aims a
+/// ray at a vertex in f32.
+const NEAR_MISS_TOLERANCE: f64 = f32::EPSILON as f64 * 32.0;
+
+/// The allowance for near misses: `bary` are the barycentrics of the point where the ray crosses the
+/// triangle's plane (at least one negative). Returns the clamped barycentrics of the nearest point
+/// of the triangle when every negative one lies within the tolerance, measured as a distance in the
+/// plane; `None` otherwise. Rare, so kept out of line.
+#[inline(never)]
+#[cold]
+fn near_miss(p: &[Vec3; 3], bary: [f64; 3], rel: [DVec3; 3]) -> Option<[f64; 3]> {
+    let q = [p[0].as_dvec3(), p[1].as_dvec3(), p[2].as_dvec3()];
+    let twice_area = (q[1] - q[0]).cross(q[2] - q[0]).length();
+    let coord_scale = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
+    let dist_scale = rel[0]
+        .abs()
+        .max(rel[1].abs())
+        .max(rel[2].abs())
+        .max_element();
+    // The caller's rounding of a ray aimed in f32 grows with the coordinates and, more slowly, with
+    // the distance from the origin.
+    let tol = NEAR_MISS_TOLERANCE * (coord_scale + 0.25 * dist_scale);
+    let mut out = [0.0; 3];
+    let mut sum = 0.0;
+    for i in 0..3 {
+        if bary[i] < 0.0 {
+            // Distance from the edge opposite vertex i = -bary · altitude.
+            let edge = (q[(i + 2) % 3] - q[(i + 1) % 3]).length();
+            if edge == 0.0 || -bary[i] * twice_area / edge > tol {
+                return None;
+            }
+        } else {
+            out[i] = bary[i];
+            sum += bary[i];
+        }
+    }
+    if !(sum > 0.0) {
+        return None;
+    }
+    Some([out[0] / sum, out[1] / sum, out[2] / sum])
 }
 
 impl PreparedRay {
@@ -128,21 +187,30 @@ impl PreparedRay {
             kx,
             ky,
             kz,
-            sx: d[kx] / d[kz],
-            sy: d[ky] / d[kz],
-            sz: 1.0 / d[kz],
+            org64: o.as_dvec3(),
+            sx: f64::from(d[kx]) / f64::from(d[kz]),
+            sy: f64::from(d[ky]) / f64::from(d[kz]),
+            sz: 1.0 / f64::from(d[kz]),
         })
     }
 
     /// The watertight test against triangle `(p0, p1, p2)`: `Some((t, u, v))` when the ray passes
-    /// through the closed triangle with `tmin ≤ t ≤ tmax`. Rays through a shared edge or vertex of two
-    /// triangles hit at least one of them; a triangle seen edge-on (zero projected area) is missed.
+    /// through the closed triangle with `tmin ≤ t ≤ tmax`.
+    ///
+    /// Guarantees: the decision is made in f64 from the f32 inputs (the translation to the ray origin
+    /// is exact and the shear nearly so), so it is the exact answer for the f32 ray except within
+    /// ~1e-15 of an edge; rays through a shared edge or vertex of two triangles hit at least one of
+    /// them; a triangle seen exactly edge-on is missed. A ray that misses a triangle by at most a few
+    /// ulps of the coordinates, measured in the triangle's plane, still hits it at the nearest point
+    /// of the triangle, so rays aimed at a vertex or along a silhouette of a closed mesh never slip
+    /// out through rounding, while grazing triangles (whose plane the ray crosses far away) are not
+    /// hit by this allowance.
     #[inline(always)]
     pub fn intersect_triangle(&self, p0: Vec3, p1: Vec3, p2: Vec3) -> Option<(f32, f32, f32)> {
         let (kx, ky, kz) = (self.kx, self.ky, self.kz);
-        let a = p0 - self.org;
-        let b = p1 - self.org;
-        let c = p2 - self.org;
+        let a = p0.as_dvec3() - self.org64;
+        let b = p1.as_dvec3() - self.org64;
+        let c = p2.as_dvec3() - self.org64;
         let ax = a[kx] - self.sx * a[kz];
         let ay = a[ky] - self.sy * a[kz];
         let bx = b[kx] - self.sx * b[kz];
@@ -152,29 +220,21 @@ impl PreparedRay {
         let mut u = cx * by - cy * bx;
         let mut v = ax * cy - ay * cx;
         let mut w = bx * ay - by * ax;
-        // A zero edge function may be a rounding artefact; products of f32 are exact in f64, so the
-        // recomputation gives the exact sign and shared edges stay consistent between neighbours.
-        if u == 0.0 || v == 0.0 || w == 0.0 {
-            u = (cx as f64 * by as f64 - cy as f64 * bx as f64) as f32;
-            v = (ax as f64 * cy as f64 - ay as f64 * cx as f64) as f32;
-            w = (bx as f64 * ay as f64 - by as f64 * ax as f64) as f32;
-        }
-        if (u < 0.0 || v < 0.0 || w < 0.0) && (u > 0.0 || v > 0.0 || w > 0.0) {
-            return None;
-        }
-        let det = u + v + w;
+        let mut det = u + v + w;
         if det == 0.0 || !det.is_finite() {
             return None;
         }
-        let az = self.sz * a[kz];
-        let bz = self.sz * b[kz];
-        let cz = self.sz * c[kz];
-        let t_scaled = u * az + v * bz + w * cz;
-        let rcp = 1.0 / det;
-        let t = t_scaled * rcp;
+        // Orient so that an inside point has three non-negative edge functions.
+        let s = if det > 0.0 { 1.0 } else { -1.0 };
+        if u * s < 0.0 || v * s < 0.0 || w * s < 0.0 {
+            let [bu, bv, bw] = near_miss(&[p0, p1, p2], [u / det, v / det, w / det], [a, b, c])?;
+            (u, v, w, det) = (bu, bv, bw, 1.0);
+        }
+        let t = (u * a[kz] + v * b[kz] + w * c[kz]) * self.sz / det;
+        let t = t as f32;
         if !(t >= self.tmin && t <= self.tmax) {
             return None;
         }
-        Some((t, v * rcp, w * rcp))
+        Some((t, (v / det) as f32, (w / det) as f32))
     }
 }

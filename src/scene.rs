@@ -51,8 +51,12 @@ pub struct BuildOptions {
 
 impl BuildOptions {
     /// Auto structure, unknown budget, no memory limit, default grid.
-    pub const DEFAULT: BuildOptions =
-        BuildOptions { structure: Structure::Auto, expected_rays: 0, memory_limit: 0, grid: GridParams::DEFAULT };
+    pub const DEFAULT: BuildOptions = BuildOptions {
+        structure: Structure::Auto,
+        expected_rays: 0,
+        memory_limit: 0,
+        grid: GridParams::DEFAULT,
+    };
 }
 
 impl Default for BuildOptions {
@@ -119,10 +123,18 @@ impl Scene {
     /// Validates the mesh and builds the requested structure. `KdTree` is not available yet and
     /// returns [`BuildError::Unsupported`]; until it is, `Auto` is served by the grid (outcome
     /// `OnlineOnGrid` for an unknown budget, `Forced` otherwise, estimates NaN).
-    pub fn build(src: &impl MeshSource, options: &BuildOptions, _calibration: &Calibration) -> Result<Scene, BuildError> {
+    pub fn build(
+        src: &impl MeshSource,
+        options: &BuildOptions,
+        _calibration: &Calibration,
+    ) -> Result<Scene, BuildError> {
         let outcome = match options.structure {
             Structure::Grid => Outcome::Forced,
-            Structure::KdTree => return Err(BuildError::Unsupported { what: "the kd-tree" }),
+            Structure::KdTree => {
+                return Err(BuildError::Unsupported {
+                    what: "the kd-tree",
+                })
+            }
             Structure::Auto if options.expected_rays == 0 => Outcome::OnlineOnGrid,
             Structure::Auto => Outcome::Forced,
         };
@@ -147,9 +159,18 @@ impl Scene {
             kd_build_seconds: f64::NAN,
             break_even_rays: f64::NAN,
             expected_rays: options.expected_rays,
-            references_per_triangle: if live == 0 { 0.0 } else { grid.reference_count() as f64 / live as f64 },
+            references_per_triangle: if live == 0 {
+                0.0
+            } else {
+                grid.reference_count() as f64 / live as f64
+            },
         };
-        Ok(Scene { mesh, accel: Accel::Grid(grid), report, rays_traced: 0 })
+        Ok(Scene {
+            mesh,
+            accel: Accel::Grid(grid),
+            report,
+            rays_traced: 0,
+        })
     }
 
     /// Records rays traced since the last call and rays still expected (0 = unknown), between batches.

@@ -14,7 +14,9 @@ pub struct BruteForce {
 impl BruteForce {
     /// The reference for `mesh`; it holds nothing but the mesh's bounds.
     pub fn new(mesh: &TriMesh) -> Self {
-        BruteForce { bounds: mesh.bounds() }
+        BruteForce {
+            bounds: mesh.bounds(),
+        }
     }
 }
 
@@ -24,14 +26,21 @@ impl RayQuery for BruteForce {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else { return Hit::MISS };
+        let Some(r) = PreparedRay::new(ray) else {
+            return Hit::MISS;
+        };
         let mut best = Hit::MISS;
         for (i, t) in mesh.triangles().iter().enumerate() {
             if mesh.is_degenerate(i as u32) {
                 continue;
             }
             if let Some((t, u, v)) = r.intersect_triangle(t[0], t[1], t[2]) {
-                let h = Hit { t, u, v, prim: i as u32 };
+                let h = Hit {
+                    t,
+                    u,
+                    v,
+                    prim: i as u32,
+                };
                 if h.beats(&best) {
                     best = h;
                 }

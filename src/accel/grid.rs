@@ -25,11 +25,20 @@ pub struct GridParams {
 impl GridParams {
     /// The default: λ = 2 with exact overlap, a good all-round setting on the bundled scenes
     /// (docs/design.md records the measurement).
-    pub const DEFAULT: GridParams = GridParams { density: 2.0, exact_overlap: true };
+    pub const DEFAULT: GridParams = GridParams {
+        density: 2.0,
+        exact_overlap: true,
+    };
     /// Fewer cells (λ = 0.5): less memory and a faster build, slower rays.
-    pub const COARSE: GridParams = GridParams { density: 0.5, exact_overlap: true };
+    pub const COARSE: GridParams = GridParams {
+        density: 0.5,
+        exact_overlap: true,
+    };
     /// More cells (λ = 8): faster rays on clustered scenes, more memory.
-    pub const FINE: GridParams = GridParams { density: 8.0, exact_overlap: true };
+    pub const FINE: GridParams = GridParams {
+        density: 8.0,
+        exact_overlap: true,
+    };
 }
 
 impl Default for GridParams {
@@ -42,7 +51,7 @@ impl Default for GridParams {
 ///
 /// # Guarantees
 /// - every non-degenerate triangle is listed in every cell it overlaps, where "overlaps" is tested
-///   against the cell enlarged by a small margin (1/256 of a cell plus a few ulps of the coordinates),
+///   against the cell enlarged by a small margin (1/128 of a cell plus a few ulps of the coordinates),
 ///   so rounding in the traversal can never skip a triangle that the shared test would hit;
 /// - each cell's list is sorted by primitive id;
 /// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at `refs.len()`.
@@ -69,9 +78,15 @@ pub struct GridWork {
 impl UniformGrid {
     /// Builds the grid over `mesh`, charging its arrays to `budget`. Time and memory are linear in
     /// the number of triangles plus cells plus references.
-    pub fn build(mesh: &TriMesh, params: &GridParams, budget: &mut MemoryBudget) -> Result<UniformGrid, BuildError> {
+    pub fn build(
+        mesh: &TriMesh,
+        params: &GridParams,
+        budget: &mut MemoryBudget,
+    ) -> Result<UniformGrid, BuildError> {
         if !(params.density.is_finite() && params.density > 0.0) {
-            return Err(BuildError::InvalidArgument { what: "grid density must be finite and positive" });
+            return Err(BuildError::InvalidArgument {
+                what: "grid density must be finite and positive",
+            });
         }
         let live = mesh.len() - mesh.degenerate_count();
         let tight = mesh.bounds();
@@ -92,8 +107,16 @@ impl UniformGrid {
         let cell_size = (bounds.max - bounds.min) / resf;
         let inv_cell_size = resf / (bounds.max - bounds.min);
         let abs_scale = bounds.min.abs().max(bounds.max.abs()).max_element();
-        let margin = cell_size * (1.0 / 256.0) + Vec3::splat(abs_scale * f32::EPSILON * 4.0);
-        let mut grid = UniformGrid { bounds, res, cell_size, inv_cell_size, margin, offsets: Vec::new(), refs: Vec::new() };
+        let margin = cell_size * (1.0 / 128.0) + Vec3::splat(abs_scale * f32::EPSILON * 64.0);
+        let mut grid = UniformGrid {
+            bounds,
+            res,
+            cell_size,
+            inv_cell_size,
+            margin,
+            offsets: Vec::new(),
+            refs: Vec::new(),
+        };
 
         let geometry = grid.geometry();
         let mut counts = budget.filled(cells + 1, 0u32, "grid cell offsets")?;
@@ -114,7 +137,9 @@ impl UniformGrid {
             total += u64::from(*n);
             if overflow || total > u64::from(u32::MAX) {
                 budget.free(counts);
-                return Err(BuildError::CapacityExceeded { what: "grid references" });
+                return Err(BuildError::CapacityExceeded {
+                    what: "grid references",
+                });
             }
             *n = total as u32;
         }
@@ -174,7 +199,13 @@ impl UniformGrid {
     }
 
     fn geometry(&self) -> Geometry {
-        Geometry { min: self.bounds.min, res: self.res, cell_size: self.cell_size, inv: self.inv_cell_size, margin: self.margin }
+        Geometry {
+            min: self.bounds.min,
+            res: self.res,
+            cell_size: self.cell_size,
+            inv: self.inv_cell_size,
+            margin: self.margin,
+        }
     }
 
     #[inline(always)]
@@ -186,7 +217,9 @@ impl UniformGrid {
 
     #[inline(always)]
     fn closest<const COUNT: bool>(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else { return Hit::MISS };
+        let Some(r) = PreparedRay::new(ray) else {
+            return Hit::MISS;
+        };
         let mut best = Hit::MISS;
         self.walk(&r, |cell, t_exit| {
             let prims = self.cell_prims(cell);
@@ -195,7 +228,9 @@ impl UniformGrid {
                 work.tests += prims.len() as u32;
             }
             for &prim in prims {
-                let Some(t) = mesh.triangle(prim) else { continue };
+                let Some(t) = mesh.triangle(prim) else {
+                    continue;
+                };
                 if let Some((t, u, v)) = r.intersect_triangle(t[0], t[1], t[2]) {
                     let h = Hit { t, u, v, prim };
                     if h.beats(&best) {
@@ -246,13 +281,20 @@ impl UniformGrid {
             let p = o[a] + t_start * d[a];
             let c = math::floor((p - self.bounds.min[a]) * self.inv_cell_size[a]);
             let last = self.res[a] as i64 - 1;
-            cell[a] = if c.is_nan() { 0 } else { (c.clamp(-1.0, last as f32 + 1.0) as i64).clamp(0, last) };
+            cell[a] = if c.is_nan() {
+                0
+            } else {
+                (c.clamp(-1.0, last as f32 + 1.0) as i64).clamp(0, last)
+            };
             if moving[a] {
                 step[a] = if d[a] > 0.0 { 1 } else { -1 };
                 t_next[a] = self.boundary_t(a, cell[a] + i64::from(d[a] > 0.0), o[a], inv[a]);
             }
         }
-        let (rx, rxy) = (self.res[0] as usize, self.res[0] as usize * self.res[1] as usize);
+        let (rx, rxy) = (
+            self.res[0] as usize,
+            self.res[0] as usize * self.res[1] as usize,
+        );
         loop {
             let index = cell[0] as usize + cell[1] as usize * rx + cell[2] as usize * rxy;
             let axis = if t_next[0] <= t_next[1] && t_next[0] <= t_next[2] {
@@ -270,7 +312,12 @@ impl UniformGrid {
             if cell[axis] < 0 || cell[axis] >= self.res[axis] as i64 {
                 return;
             }
-            t_next[axis] = self.boundary_t(axis, cell[axis] + i64::from(step[axis] > 0), o[axis], inv[axis]);
+            t_next[axis] = self.boundary_t(
+                axis,
+                cell[axis] + i64::from(step[axis] > 0),
+                o[axis],
+                inv[axis],
+            );
         }
     }
 
@@ -293,11 +340,14 @@ impl RayQuery for UniformGrid {
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        let Some(r) = PreparedRay::new(ray) else { return false };
+        let Some(r) = PreparedRay::new(ray) else {
+            return false;
+        };
         let mut hit = false;
         self.walk(&r, |cell, _| {
             hit = self.cell_prims(cell).iter().any(|&prim| {
-                mesh.triangle(prim).is_some_and(|t| r.intersect_triangle(t[0], t[1], t[2]).is_some())
+                mesh.triangle(prim)
+                    .is_some_and(|t| r.intersect_triangle(t[0], t[1], t[2]).is_some())
             });
             hit
         });
@@ -321,7 +371,10 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
     let abs_scale = tight.min.abs().max(tight.max.abs()).max_element();
     // Pad so that triangles on the box faces lie strictly inside and flat scenes get a thin slab.
     let pad = max_ext * (1.0 / 4096.0) + abs_scale * f32::EPSILON * 16.0 + f32::MIN_POSITIVE;
-    let bounds = Aabb { min: tight.min - Vec3::splat(pad), max: tight.max + Vec3::splat(pad) };
+    let bounds = Aabb {
+        min: tight.min - Vec3::splat(pad),
+        max: tight.max + Vec3::splat(pad),
+    };
     let target = (f64::from(lambda) * live as f64).max(1.0);
     // Axes too thin to split get one cell; the others share the target in proportion to their extent.
     let e = [f64::from(ext.x), f64::from(ext.y), f64::from(ext.z)];
@@ -349,7 +402,7 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
                     split[a] = false;
                     changed = true;
                 }
-                res[a] = r.round().clamp(1.0, target.min(f64::from(u32::MAX))) as u32;
+                res[a] = math::floor64(r + 0.5).clamp(1.0, target.min(f64::from(u32::MAX))) as u32;
             } else {
                 res[a] = 1;
             }
@@ -402,7 +455,11 @@ fn cell_range(g: &Geometry, p: Vec3) -> [u32; 3] {
 /// Separating-axis test of a triangle against a box (center, half extents), in f64 so that the only
 /// tolerance that matters is the margin already added to the box.
 fn triangle_overlaps_box(tri: &[Vec3; 3], center: DVec3, half: DVec3) -> bool {
-    let v = [tri[0].as_dvec3() - center, tri[1].as_dvec3() - center, tri[2].as_dvec3() - center];
+    let v = [
+        tri[0].as_dvec3() - center,
+        tri[1].as_dvec3() - center,
+        tri[2].as_dvec3() - center,
+    ];
     let e = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
     // The nine edge × box-axis directions.
     for edge in &e {

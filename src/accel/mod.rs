@@ -19,12 +19,18 @@ pub struct Aabb {
 
 impl Aabb {
     /// The box that contains nothing; growing it by a point gives that point.
-    pub const EMPTY: Aabb = Aabb { min: Vec3::splat(f32::INFINITY), max: Vec3::splat(f32::NEG_INFINITY) };
+    pub const EMPTY: Aabb = Aabb {
+        min: Vec3::splat(f32::INFINITY),
+        max: Vec3::splat(f32::NEG_INFINITY),
+    };
 
     /// The smallest box holding `self` and `p`.
     #[inline]
     pub fn grow(self, p: Vec3) -> Aabb {
-        Aabb { min: self.min.min(p), max: self.max.max(p) }
+        Aabb {
+            min: self.min.min(p),
+            max: self.max.max(p),
+        }
     }
 
     /// True when the box holds no point.
@@ -44,7 +50,10 @@ impl Aabb {
     /// The bounds of a triangle.
     #[inline]
     pub fn of_triangle(t: &[Vec3; 3]) -> Aabb {
-        Aabb { min: t[0].min(t[1]).min(t[2]), max: t[0].max(t[1]).max(t[2]) }
+        Aabb {
+            min: t[0].min(t[1]).min(t[2]),
+            max: t[0].max(t[1]).max(t[2]),
+        }
     }
 }
 

@@ -19,7 +19,11 @@ fn builtin_ptr() -> *const rq_calibration {
 /// # Safety
 /// `data` is readable for `len` bytes; `out` is writable.
 #[no_mangle]
-pub unsafe extern "C" fn rq_calibration_from_bytes(data: *const u8, len: usize, out: *mut *mut rq_calibration) -> rq_status {
+pub unsafe extern "C" fn rq_calibration_from_bytes(
+    data: *const u8,
+    len: usize,
+    out: *mut *mut rq_calibration,
+) -> rq_status {
     boundary(|| {
         if data.is_null() || out.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
@@ -30,7 +34,9 @@ pub unsafe extern "C" fn rq_calibration_from_bytes(data: *const u8, len: usize, 
             Ok(c) => match try_box(c) {
                 Some(b) => {
                     // SAFETY: out is writable (contract).
-                    unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(b) as *mut rq_calibration) };
+                    unsafe {
+                        out.write_unaligned(alloc::boxed::Box::into_raw(b) as *mut rq_calibration)
+                    };
                     rq_status::RQ_STATUS_OK
                 }
                 None => rq_status::RQ_STATUS_OUT_OF_MEMORY,
@@ -46,13 +52,23 @@ pub unsafe extern "C" fn rq_calibration_from_bytes(data: *const u8, len: usize, 
 /// # Safety
 /// `calib` is a live handle; `buf` writable for `cap` bytes; `written` writable.
 #[no_mangle]
-pub unsafe extern "C" fn rq_calibration_to_bytes(calib: *const rq_calibration, buf: *mut u8, cap: usize, written: *mut usize) -> rq_status {
+pub unsafe extern "C" fn rq_calibration_to_bytes(
+    calib: *const rq_calibration,
+    buf: *mut u8,
+    cap: usize,
+    written: *mut usize,
+) -> rq_status {
     boundary(|| {
         if calib.is_null() || buf.is_null() || written.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         }
         // SAFETY: calib is a live handle pointing to a Calibration; buf is writable for cap bytes.
-        let (c, out) = unsafe { (&*(calib as *const Calibration), core::slice::from_raw_parts_mut(buf, cap)) };
+        let (c, out) = unsafe {
+            (
+                &*(calib as *const Calibration),
+                core::slice::from_raw_parts_mut(buf, cap),
+            )
+        };
         match c.to_bytes(out) {
             Ok(n) => {
                 // SAFETY: written is writable (contract).

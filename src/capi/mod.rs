@@ -62,7 +62,8 @@ impl PanicValue for u32 {
 fn boundary<T: PanicValue>(body: impl FnOnce() -> T) -> T {
     #[cfg(feature = "std")]
     {
-        std::panic::catch_unwind(core::panic::AssertUnwindSafe(body)).unwrap_or_else(|_| T::on_panic())
+        std::panic::catch_unwind(core::panic::AssertUnwindSafe(body))
+            .unwrap_or_else(|_| T::on_panic())
     }
     #[cfg(not(feature = "std"))]
     {
@@ -83,7 +84,9 @@ impl From<BuildError> for rq_status {
     fn from(e: BuildError) -> Self {
         match e {
             BuildError::InvalidMesh(m) => m.into(),
-            BuildError::OutOfMemory { .. } | BuildError::CapacityExceeded { .. } => rq_status::RQ_STATUS_OUT_OF_MEMORY,
+            BuildError::OutOfMemory { .. } | BuildError::CapacityExceeded { .. } => {
+                rq_status::RQ_STATUS_OUT_OF_MEMORY
+            }
             BuildError::MemoryLimit { .. } => rq_status::RQ_STATUS_MEMORY_LIMIT,
             BuildError::Unsupported { .. } => rq_status::RQ_STATUS_UNSUPPORTED,
             BuildError::InvalidArgument { .. } => rq_status::RQ_STATUS_INVALID_ARGUMENT,
@@ -143,7 +146,11 @@ pub extern "C" fn rq_abi_version() -> u32 {
 /// The library version as a static NUL-terminated string, e.g. "rayq 0.1.0".
 #[no_mangle]
 pub extern "C" fn rq_version_string() -> *const c_char {
-    boundary(|| concat!("rayq ", env!("CARGO_PKG_VERSION"), "\0").as_ptr().cast())
+    boundary(|| {
+        concat!("rayq ", env!("CARGO_PKG_VERSION"), "\0")
+            .as_ptr()
+            .cast()
+    })
 }
 
 /// A fixed-size, NUL-terminated message buffer, so that error callbacks get text without allocating.
@@ -154,7 +161,10 @@ struct Message {
 
 impl Message {
     fn new(args: core::fmt::Arguments<'_>) -> Message {
-        let mut m = Message { buf: [0; 256], len: 0 };
+        let mut m = Message {
+            buf: [0; 256],
+            len: 0,
+        };
         let _ = core::fmt::write(&mut m, args);
         m
     }

@@ -25,9 +25,15 @@ pub unsafe extern "C" fn rq_obj_load(path: *const c_char, out: *mut *mut rq_obj)
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         }
         // SAFETY: path is NUL-terminated (contract).
-        let Ok(path) = unsafe { CStr::from_ptr(path) }.to_str() else { return rq_status::RQ_STATUS_INVALID_ARGUMENT };
-        let Ok(mesh) = crate::obj::load_obj(path) else { return rq_status::RQ_STATUS_INVALID_ARGUMENT };
-        let Some(b) = try_box(mesh) else { return rq_status::RQ_STATUS_OUT_OF_MEMORY };
+        let Ok(path) = unsafe { CStr::from_ptr(path) }.to_str() else {
+            return rq_status::RQ_STATUS_INVALID_ARGUMENT;
+        };
+        let Ok(mesh) = crate::obj::load_obj(path) else {
+            return rq_status::RQ_STATUS_INVALID_ARGUMENT;
+        };
+        let Some(b) = try_box(mesh) else {
+            return rq_status::RQ_STATUS_OUT_OF_MEMORY;
+        };
         // SAFETY: out is writable (contract).
         unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(b) as *mut rq_obj) };
         rq_status::RQ_STATUS_OK
@@ -42,7 +48,9 @@ pub unsafe extern "C" fn rq_obj_load(path: *const c_char, out: *mut *mut rq_obj)
 pub unsafe extern "C" fn rq_obj_mesh_desc(obj: *const rq_obj, out: *mut rq_mesh_desc) -> rq_status {
     boundary(|| {
         // SAFETY: a non-NULL handle is a live Box<MeshData> (contract).
-        let Some(m) = (unsafe { (obj as *const MeshData).as_ref() }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        let Some(m) = (unsafe { (obj as *const MeshData).as_ref() }) else {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        };
         if out.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         }
@@ -64,10 +72,16 @@ pub unsafe extern "C" fn rq_obj_mesh_desc(obj: *const rq_obj, out: *mut rq_mesh_
 /// # Safety
 /// `obj` is a live handle; `lo` and `hi` are writable for three floats.
 #[no_mangle]
-pub unsafe extern "C" fn rq_obj_bounds(obj: *const rq_obj, lo: *mut f32, hi: *mut f32) -> rq_status {
+pub unsafe extern "C" fn rq_obj_bounds(
+    obj: *const rq_obj,
+    lo: *mut f32,
+    hi: *mut f32,
+) -> rq_status {
     boundary(|| {
         // SAFETY: a non-NULL handle is a live Box<MeshData> (contract).
-        let Some(m) = (unsafe { (obj as *const MeshData).as_ref() }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        let Some(m) = (unsafe { (obj as *const MeshData).as_ref() }) else {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        };
         if lo.is_null() || hi.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         }

@@ -56,7 +56,11 @@ macro_rules! read_covered {
         let end = offset_of!(rq_build_options, $field) + size_of::<$ty>();
         if $size >= end {
             // SAFETY: the caller's struct_size says these bytes are part of its options struct.
-            unsafe { ptr::read_unaligned(($p as *const u8).add(offset_of!(rq_build_options, $field)) as *const $ty) }
+            unsafe {
+                ptr::read_unaligned(
+                    ($p as *const u8).add(offset_of!(rq_build_options, $field)) as *const $ty
+                )
+            }
         } else {
             $default
         }
@@ -67,7 +71,9 @@ macro_rules! read_covered {
 ///
 /// # Safety
 /// `p` is NULL or points to readable memory of at least `struct_size` bytes (capped at our size).
-unsafe fn read_options(p: *const rq_build_options) -> Result<Options, (rq_status, &'static str, Options)> {
+unsafe fn read_options(
+    p: *const rq_build_options,
+) -> Result<Options, (rq_status, &'static str, Options)> {
     let mut o = Options {
         structure: Structure::Auto,
         expected_rays: 0,
@@ -83,21 +89,35 @@ unsafe fn read_options(p: *const rq_build_options) -> Result<Options, (rq_status
     o.on_error = read_covered!(p, size, on_error, rq_error_fn, None);
     o.user = read_covered!(p, size, user, *mut core::ffi::c_void, ptr::null_mut());
     if size < offset_of!(rq_build_options, structure) + size_of::<u32>() {
-        return Err((rq_status::RQ_STATUS_INVALID_ARGUMENT, "rq_build_options.struct_size is too small: call rq_build_options_init", o));
+        return Err((
+            rq_status::RQ_STATUS_INVALID_ARGUMENT,
+            "rq_build_options.struct_size is too small: call rq_build_options_init",
+            o,
+        ));
     }
     let structure: u32 = read_covered!(p, size, structure, u32, 0);
     o.structure = match structure {
         0 => Structure::Auto,
         1 => Structure::Grid,
         2 => Structure::KdTree,
-        _ => return Err((rq_status::RQ_STATUS_INVALID_ARGUMENT, "rq_build_options.structure is not an rq_structure value", o)),
+        _ => {
+            return Err((
+                rq_status::RQ_STATUS_INVALID_ARGUMENT,
+                "rq_build_options.structure is not an rq_structure value",
+                o,
+            ))
+        }
     };
     o.expected_rays = read_covered!(p, size, expected_rays, u64, 0);
     o.memory_limit = read_covered!(p, size, memory_limit, usize, 0);
     let samples: *const rq_ray = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
     let sample_count: usize = read_covered!(p, size, sample_ray_count, usize, 0);
     if samples.is_null() && sample_count != 0 {
-        return Err((rq_status::RQ_STATUS_NULL_ARGUMENT, "rq_build_options.sample_rays is NULL but sample_ray_count is not 0", o));
+        return Err((
+            rq_status::RQ_STATUS_NULL_ARGUMENT,
+            "rq_build_options.sample_rays is NULL but sample_ray_count is not 0",
+            o,
+        ));
     }
     Ok(o)
 }
@@ -116,27 +136,39 @@ impl RawMesh {
     /// The descriptor's pointers, when not NULL, must cover the sizes its counts imply.
     unsafe fn new(d: &rq_mesh_desc) -> Result<RawMesh, MeshError> {
         if d.vertex_stride < 12 {
-            return Err(MeshError::StrideTooSmall { stride: d.vertex_stride });
+            return Err(MeshError::StrideTooSmall {
+                stride: d.vertex_stride,
+            });
         }
         let vertex_bytes = match d.vertex_count {
             0 => Some(0),
-            n => (n - 1).checked_mul(d.vertex_stride).and_then(|b| b.checked_add(12)),
+            n => (n - 1)
+                .checked_mul(d.vertex_stride)
+                .and_then(|b| b.checked_add(12)),
         };
         let index_bytes = d.triangle_count.checked_mul(12);
         let fits = |p: usize, bytes: Option<usize>| {
             bytes.is_some_and(|b| b <= isize::MAX as usize && p.checked_add(b).is_some())
         };
         if !fits(d.vertices as usize, vertex_bytes) {
-            return Err(MeshError::CountOverflow { what: "vertex_count * vertex_stride" });
+            return Err(MeshError::CountOverflow {
+                what: "vertex_count * vertex_stride",
+            });
         }
         if !fits(d.indices as usize, index_bytes) {
-            return Err(MeshError::CountOverflow { what: "triangle_count * 12" });
+            return Err(MeshError::CountOverflow {
+                what: "triangle_count * 12",
+            });
         }
         if d.vertex_count != 0 && d.vertices.is_null() {
-            return Err(MeshError::MissingData { what: "rq_mesh_desc.vertices" });
+            return Err(MeshError::MissingData {
+                what: "rq_mesh_desc.vertices",
+            });
         }
         if d.triangle_count != 0 && d.indices.is_null() {
-            return Err(MeshError::MissingData { what: "rq_mesh_desc.indices" });
+            return Err(MeshError::MissingData {
+                what: "rq_mesh_desc.indices",
+            });
         }
         Ok(RawMesh {
             vertices: d.vertices as *const u8,
@@ -191,11 +223,21 @@ pub unsafe extern "C" fn rq_scene_build(
         // SAFETY: opts is NULL or a readable options struct (function contract).
         let o = match unsafe { read_options(opts) } {
             Ok(o) => o,
-            Err((status, text, o)) => return report_error(&o, status, &Message::new(format_args!("{text}"))),
+            Err((status, text, o)) => {
+                return report_error(&o, status, &Message::new(format_args!("{text}")))
+            }
         };
         if mesh.is_null() || out.is_null() {
-            let text = if mesh.is_null() { "mesh is NULL" } else { "out is NULL" };
-            return report_error(&o, rq_status::RQ_STATUS_NULL_ARGUMENT, &Message::new(format_args!("{text}")));
+            let text = if mesh.is_null() {
+                "mesh is NULL"
+            } else {
+                "out is NULL"
+            };
+            return report_error(
+                &o,
+                rq_status::RQ_STATUS_NULL_ARGUMENT,
+                &Message::new(format_args!("{text}")),
+            );
         }
         // SAFETY: mesh is not NULL and points to a descriptor (contract).
         let desc = unsafe { ptr::read_unaligned(mesh) };
@@ -221,7 +263,10 @@ pub unsafe extern "C" fn rq_scene_build(
             Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
         };
         let Some(boxed) = try_box(scene) else {
-            let e = BuildError::OutOfMemory { what: "scene handle", bytes: size_of::<Scene>() };
+            let e = BuildError::OutOfMemory {
+                what: "scene handle",
+                bytes: size_of::<Scene>(),
+            };
             return report_error(&o, e.into(), &Message::new(format_args!("{e}")));
         };
         // SAFETY: out is not NULL (checked) and writable (contract).
@@ -252,11 +297,21 @@ unsafe fn scene_ref<'a>(scene: *const rq_scene) -> Option<&'a Scene> {
 }
 
 fn to_ray(r: &rq_ray) -> Ray {
-    Ray { org: Vec3::from(r.org), tmin: r.tmin, dir: Vec3::from(r.dir), tmax: r.tmax }
+    Ray {
+        org: Vec3::from(r.org),
+        tmin: r.tmin,
+        dir: Vec3::from(r.dir),
+        tmax: r.tmax,
+    }
 }
 
 fn to_hit(h: Hit) -> rq_hit {
-    rq_hit { t: h.t, u: h.u, v: h.v, prim: h.prim }
+    rq_hit {
+        t: h.t,
+        u: h.u,
+        v: h.v,
+        prim: h.prim,
+    }
 }
 
 /// The closest hit of `ray`: true on a hit. `*out` is always written when not NULL (a miss as
@@ -265,7 +320,11 @@ fn to_hit(h: Hit) -> rq_hit {
 /// # Safety
 /// `scene` is NULL or a live handle; `ray` NULL or readable; `out` NULL or writable.
 #[no_mangle]
-pub unsafe extern "C" fn rq_scene_intersect(scene: *const rq_scene, ray: *const rq_ray, out: *mut rq_hit) -> bool {
+pub unsafe extern "C" fn rq_scene_intersect(
+    scene: *const rq_scene,
+    ray: *const rq_ray,
+    out: *mut rq_hit,
+) -> bool {
     boundary(|| {
         // SAFETY: per the function contract.
         let hit = match (unsafe { scene_ref(scene) }, ray.is_null()) {
@@ -298,10 +357,17 @@ pub unsafe extern "C" fn rq_scene_occluded(scene: *const rq_scene, ray: *const r
 /// # Safety
 /// `rays` readable and `hits` writable for `n` elements when `n > 0`.
 #[no_mangle]
-pub unsafe extern "C" fn rq_scene_intersect_n(scene: *const rq_scene, rays: *const rq_ray, hits: *mut rq_hit, n: usize) -> rq_status {
+pub unsafe extern "C" fn rq_scene_intersect_n(
+    scene: *const rq_scene,
+    rays: *const rq_ray,
+    hits: *mut rq_hit,
+    n: usize,
+) -> rq_status {
     boundary(|| {
         // SAFETY: per the function contract.
-        let Some(s) = (unsafe { scene_ref(scene) }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        let Some(s) = (unsafe { scene_ref(scene) }) else {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        };
         if n == 0 {
             return rq_status::RQ_STATUS_OK;
         }
@@ -312,7 +378,8 @@ pub unsafe extern "C" fn rq_scene_intersect_n(scene: *const rq_scene, rays: *con
             // SAFETY: i < n and the arrays hold n elements (contract).
             unsafe {
                 let r = ptr::read_unaligned(rays.add(i));
-                hits.add(i).write_unaligned(to_hit(s.intersect(&to_ray(&r))));
+                hits.add(i)
+                    .write_unaligned(to_hit(s.intersect(&to_ray(&r))));
             }
         }
         rq_status::RQ_STATUS_OK
@@ -355,10 +422,15 @@ macro_rules! write_covered {
 /// # Safety
 /// `scene` is NULL or a live handle; `out` NULL or writable for `out->struct_size` bytes.
 #[no_mangle]
-pub unsafe extern "C" fn rq_scene_report_get(scene: *const rq_scene, out: *mut rq_scene_report) -> rq_status {
+pub unsafe extern "C" fn rq_scene_report_get(
+    scene: *const rq_scene,
+    out: *mut rq_scene_report,
+) -> rq_status {
     boundary(|| {
         // SAFETY: per the function contract.
-        let Some(s) = (unsafe { scene_ref(scene) }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        let Some(s) = (unsafe { scene_ref(scene) }) else {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        };
         if out.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         }
@@ -378,7 +450,12 @@ pub unsafe extern "C" fn rq_scene_report_get(scene: *const rq_scene, out: *mut r
         write_covered!(out, size, kd_build_seconds, r.kd_build_seconds);
         write_covered!(out, size, break_even_rays, r.break_even_rays);
         write_covered!(out, size, expected_rays, r.expected_rays);
-        write_covered!(out, size, references_per_triangle, r.references_per_triangle);
+        write_covered!(
+            out,
+            size,
+            references_per_triangle,
+            r.references_per_triangle
+        );
         rq_status::RQ_STATUS_OK
     })
 }
@@ -390,10 +467,16 @@ pub unsafe extern "C" fn rq_scene_report_get(scene: *const rq_scene, out: *mut r
 /// # Safety
 /// `scene` is NULL or a live handle not being queried by another thread.
 #[no_mangle]
-pub unsafe extern "C" fn rq_scene_update(scene: *mut rq_scene, rays_traced: u64, rays_remaining: u64) -> rq_status {
+pub unsafe extern "C" fn rq_scene_update(
+    scene: *mut rq_scene,
+    rays_traced: u64,
+    rays_remaining: u64,
+) -> rq_status {
     boundary(|| {
         // SAFETY: a non-NULL handle is a live Box<Scene> with no concurrent users (contract).
-        let Some(s) = (unsafe { (scene as *mut Scene).as_mut() }) else { return rq_status::RQ_STATUS_NULL_ARGUMENT };
+        let Some(s) = (unsafe { (scene as *mut Scene).as_mut() }) else {
+            return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        };
         s.update(rays_traced, rays_remaining);
         rq_status::RQ_STATUS_OK
     })

@@ -118,7 +118,8 @@ pub struct rq_mesh_desc {
 }
 
 /// Error callback: told the status and a NUL-terminated message that lives only during the call.
-pub type rq_error_fn = Option<unsafe extern "C" fn(user: *mut c_void, status: rq_status, message: *const c_char)>;
+pub type rq_error_fn =
+    Option<unsafe extern "C" fn(user: *mut c_void, status: rq_status, message: *const c_char)>;
 
 /// Build options. Fill with `rq_build_options_init`, then change what you need. The library reads
 /// only the fields that `struct_size` covers, so a program built against an older header keeps working.

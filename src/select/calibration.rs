@@ -17,14 +17,54 @@ pub struct Constant {
 
 /// The constants in blob order. Appending is a minor format change; anything else is a major one.
 pub const CONSTANTS: [Constant; 8] = [
-    Constant { name: "grid_build_ns_per_triangle", min: 0.0, max: 1e6, meaning: "grid build time per triangle" },
-    Constant { name: "grid_build_ns_per_reference", min: 0.0, max: 1e6, meaning: "grid build time per cell reference" },
-    Constant { name: "grid_ns_per_cell", min: 0.0, max: 1e6, meaning: "grid traversal time per cell visited" },
-    Constant { name: "grid_ns_per_test", min: 0.0, max: 1e6, meaning: "triangle test time in the grid" },
-    Constant { name: "kd_build_ns_per_nlogn", min: 0.0, max: 1e6, meaning: "kd-tree build time per N·log2 N" },
-    Constant { name: "kd_ns_per_node", min: 0.0, max: 1e6, meaning: "kd-tree traversal time per node visited" },
-    Constant { name: "kd_ns_per_test", min: 0.0, max: 1e6, meaning: "triangle test time in the kd-tree" },
-    Constant { name: "kd_ns_per_ray", min: 0.0, max: 1e6, meaning: "fixed kd-tree cost per ray" },
+    Constant {
+        name: "grid_build_ns_per_triangle",
+        min: 0.0,
+        max: 1e6,
+        meaning: "grid build time per triangle",
+    },
+    Constant {
+        name: "grid_build_ns_per_reference",
+        min: 0.0,
+        max: 1e6,
+        meaning: "grid build time per cell reference",
+    },
+    Constant {
+        name: "grid_ns_per_cell",
+        min: 0.0,
+        max: 1e6,
+        meaning: "grid traversal time per cell visited",
+    },
+    Constant {
+        name: "grid_ns_per_test",
+        min: 0.0,
+        max: 1e6,
+        meaning: "triangle test time in the grid",
+    },
+    Constant {
+        name: "kd_build_ns_per_nlogn",
+        min: 0.0,
+        max: 1e6,
+        meaning: "kd-tree build time per N·log2 N",
+    },
+    Constant {
+        name: "kd_ns_per_node",
+        min: 0.0,
+        max: 1e6,
+        meaning: "kd-tree traversal time per node visited",
+    },
+    Constant {
+        name: "kd_ns_per_test",
+        min: 0.0,
+        max: 1e6,
+        meaning: "triangle test time in the kd-tree",
+    },
+    Constant {
+        name: "kd_ns_per_ray",
+        min: 0.0,
+        max: 1e6,
+        meaning: "fixed kd-tree cost per ray",
+    },
 ];
 
 /// Number of constants in this layout.
@@ -79,7 +119,11 @@ impl Calibration {
     /// A calibration from values in [`CONSTANTS`] order, refused when any is out of range.
     pub fn new(machine: u64, values: [f64; CONSTANT_COUNT]) -> Result<Calibration, CalibError> {
         check_values(&values)?;
-        Ok(Calibration { machine, build: BUILD_FINGERPRINT, values })
+        Ok(Calibration {
+            machine,
+            build: BUILD_FINGERPRINT,
+            values,
+        })
     }
 
     /// The built-in calibration.
@@ -109,7 +153,9 @@ impl Calibration {
 
     /// Writes the blob into `buf`, returning its length ([`BLOB_LEN`]).
     pub fn to_bytes(&self, buf: &mut [u8]) -> Result<usize, CalibError> {
-        let out = buf.get_mut(..BLOB_LEN).ok_or(CalibError::BufferTooSmall { needed: BLOB_LEN })?;
+        let out = buf
+            .get_mut(..BLOB_LEN)
+            .ok_or(CalibError::BufferTooSmall { needed: BLOB_LEN })?;
         out[0..8].copy_from_slice(&MAGIC);
         out[8..10].copy_from_slice(&FORMAT_MAJOR.to_le_bytes());
         out[10..12].copy_from_slice(&FORMAT_MINOR.to_le_bytes());
@@ -130,17 +176,23 @@ impl Calibration {
     /// Reads a blob, checking magic, version, length, CRC and every value before a calibration
     /// exists. Constants appended by a newer minor version are ignored.
     pub fn from_bytes(data: &[u8]) -> Result<Calibration, CalibError> {
-        let truncated = |expected: usize| CalibError::Truncated { expected, got: data.len() };
+        let truncated = |expected: usize| CalibError::Truncated {
+            expected,
+            got: data.len(),
+        };
         let magic = data.get(0..8).ok_or(truncated(HEADER_LEN + CRC_LEN))?;
         if magic != MAGIC {
             return Err(CalibError::BadMagic);
         }
-        let header = data.get(..HEADER_LEN).ok_or(truncated(HEADER_LEN + CRC_LEN))?;
+        let header = data
+            .get(..HEADER_LEN)
+            .ok_or(truncated(HEADER_LEN + CRC_LEN))?;
         let major = u16::from_le_bytes([header[8], header[9]]);
         if major != FORMAT_MAJOR {
             return Err(CalibError::UnsupportedVersion { major });
         }
-        let payload_len = u32::from_le_bytes([header[12], header[13], header[14], header[15]]) as usize;
+        let payload_len =
+            u32::from_le_bytes([header[12], header[13], header[14], header[15]]) as usize;
         let total = HEADER_LEN
             .checked_add(payload_len)
             .and_then(|n| n.checked_add(CRC_LEN))
@@ -154,10 +206,15 @@ impl Calibration {
             return Err(CalibError::Checksum);
         }
         let payload = &body[HEADER_LEN..];
-        let count = payload.get(0..4).map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
+        let count = payload
+            .get(0..4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
         let known = 4 + 8 * CONSTANT_COUNT;
         match count {
-            Some(c) if c >= CONSTANT_COUNT && payload.len() >= known && (c - CONSTANT_COUNT) <= (payload.len() - known) / 8 => {}
+            Some(c)
+                if c >= CONSTANT_COUNT
+                    && payload.len() >= known
+                    && (c - CONSTANT_COUNT) <= (payload.len() - known) / 8 => {}
             _ => return Err(truncated(HEADER_LEN + known + CRC_LEN)),
         }
         let mut values = [0.0; CONSTANT_COUNT];
@@ -168,9 +225,21 @@ impl Calibration {
             *v = f64::from_le_bytes(b);
         }
         check_values(&values)?;
-        let machine = u64::from_le_bytes(header[16..24].try_into().map_err(|_| truncated(HEADER_LEN))?);
-        let build = u64::from_le_bytes(header[24..32].try_into().map_err(|_| truncated(HEADER_LEN))?);
-        Ok(Calibration { machine, build, values })
+        let machine = u64::from_le_bytes(
+            header[16..24]
+                .try_into()
+                .map_err(|_| truncated(HEADER_LEN))?,
+        );
+        let build = u64::from_le_bytes(
+            header[24..32]
+                .try_into()
+                .map_err(|_| truncated(HEADER_LEN))?,
+        );
+        Ok(Calibration {
+            machine,
+            build,
+            values,
+        })
     }
 }
 
@@ -205,7 +274,11 @@ const CRC_TABLE: [u32; 256] = {
         let mut c = i as u32;
         let mut k = 0;
         while k < 8 {
-            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
             k += 1;
         }
         table[i] = c;
@@ -247,13 +320,19 @@ mod tests {
         let mut buf = [0u8; BLOB_LEN];
         BUILTIN.to_bytes(&mut buf).unwrap();
         for len in 0..BLOB_LEN {
-            assert!(Calibration::from_bytes(&buf[..len]).is_err(), "length {len} accepted");
+            assert!(
+                Calibration::from_bytes(&buf[..len]).is_err(),
+                "length {len} accepted"
+            );
         }
         for i in 0..BLOB_LEN {
             for bit in 0..8 {
                 let mut b = buf;
                 b[i] ^= 1 << bit;
-                assert!(Calibration::from_bytes(&b).is_err(), "flip of bit {bit} in byte {i} accepted");
+                assert!(
+                    Calibration::from_bytes(&b).is_err(),
+                    "flip of bit {bit} in byte {i} accepted"
+                );
             }
         }
     }
@@ -265,7 +344,12 @@ mod tests {
             c.values[3] = bad;
             let mut buf = [0u8; BLOB_LEN];
             c.to_bytes(&mut buf).unwrap();
-            assert_eq!(Calibration::from_bytes(&buf), Err(CalibError::ValueOutOfRange { field: CONSTANTS[3].name }));
+            assert_eq!(
+                Calibration::from_bytes(&buf),
+                Err(CalibError::ValueOutOfRange {
+                    field: CONSTANTS[3].name
+                })
+            );
         }
     }
 
@@ -282,6 +366,9 @@ mod tests {
         buf[end - 8..end].copy_from_slice(&123.0f64.to_le_bytes());
         let crc = crc32(&buf[..end]);
         buf[end..].copy_from_slice(&crc.to_le_bytes());
-        assert_eq!(Calibration::from_bytes(&buf).map(|c| c.values), Ok(BUILTIN.values));
+        assert_eq!(
+            Calibration::from_bytes(&buf).map(|c| c.values),
+            Ok(BUILTIN.values)
+        );
     }
 }
