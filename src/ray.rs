@@ -109,47 +109,79 @@ pub struct PreparedRay {
     sz: f64,
 }
 
-/// How far, relative to the magnitude of the coordinates, a ray may miss a triangle (measured in the
-/// triangle's plane) and still hit it: 32 ulps of f32, a few times the rounding a caller makes when it aims a
-/// ray at a vertex in f32.
-const NEAR_MISS_TOLERANCE: f64 = f32::EPSILON as f64 * 32.0;
+/// How far, relative to the magnitude of the triangle's coordinates, a ray may miss it (measured in
+/// the triangle's plane) and still hit it: 16 ulps of f32, a few times the rounding a caller makes
+/// when it aims a ray at a vertex in f32. Structures must enlarge their cells by more than this.
+pub const NEAR_MISS_TOLERANCE: f32 = f32::EPSILON * 16.0;
+/// The same allowance per unit of distance between the ray origin and the triangle (8 ulps).
+pub const NEAR_MISS_TOLERANCE_PER_DISTANCE: f32 = f32::EPSILON * 8.0;
 
 /// The allowance for near misses: `bary` are the barycentrics of the point where the ray crosses the
-/// triangle's plane (at least one negative). Returns the clamped barycentrics of the nearest point
-/// of the triangle when every negative one lies within the tolerance, measured as a distance in the
-/// plane; `None` otherwise. Rare, so kept out of line.
+/// triangle's plane (at least one negative). Returns the barycentrics of the triangle's nearest
+/// point to that crossing when it lies within the tolerance; `None` otherwise. Rare, so kept out of
+/// line.
 #[inline(never)]
 #[cold]
 fn near_miss(p: &[Vec3; 3], bary: [f64; 3], rel: [DVec3; 3]) -> Option<[f64; 3]> {
     let q = [p[0].as_dvec3(), p[1].as_dvec3(), p[2].as_dvec3()];
-    let twice_area = (q[1] - q[0]).cross(q[2] - q[0]).length();
+    let crossing = bary[0] * q[0] + bary[1] * q[1] + bary[2] * q[2];
+    let nearest = closest_point_barycentrics(crossing, &q);
+    let point = nearest[0] * q[0] + nearest[1] * q[1] + nearest[2] * q[2];
     let coord_scale = q[0].abs().max(q[1].abs()).max(q[2].abs()).max_element();
     let dist_scale = rel[0]
         .abs()
         .max(rel[1].abs())
         .max(rel[2].abs())
         .max_element();
-    // The caller's rounding of a ray aimed in f32 grows with the coordinates and, more slowly, with
-    // the distance from the origin.
-    let tol = NEAR_MISS_TOLERANCE * (coord_scale + 0.25 * dist_scale);
-    let mut out = [0.0; 3];
-    let mut sum = 0.0;
-    for i in 0..3 {
-        if bary[i] < 0.0 {
-            // Distance from the edge opposite vertex i = -bary · altitude.
-            let edge = (q[(i + 2) % 3] - q[(i + 1) % 3]).length();
-            if edge == 0.0 || -bary[i] * twice_area / edge > tol {
-                return None;
-            }
-        } else {
-            out[i] = bary[i];
-            sum += bary[i];
-        }
+    // The caller's rounding of a ray aimed in f32 grows with the coordinates and with the distance
+    // from the origin.
+    let tol = f64::from(NEAR_MISS_TOLERANCE) * coord_scale
+        + f64::from(NEAR_MISS_TOLERANCE_PER_DISTANCE) * dist_scale;
+    if (point - crossing).length() <= tol {
+        Some(nearest)
+    } else {
+        None
     }
-    if !(sum > 0.0) {
-        return None;
+}
+
+/// Barycentrics of the point of triangle `q` nearest to `x`, a point in the triangle's plane (the
+/// Voronoi-region walk of Ericson, Real-Time Collision Detection, 5.1.5).
+fn closest_point_barycentrics(x: DVec3, q: &[DVec3; 3]) -> [f64; 3] {
+    let ab = q[1] - q[0];
+    let ac = q[2] - q[0];
+    let ap = x - q[0];
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
     }
-    Some([out[0] / sum, out[1] / sum, out[2] / sum])
+    let bp = x - q[1];
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = x - q[2];
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    [1.0 - v - w, v, w]
 }
 
 impl PreparedRay {

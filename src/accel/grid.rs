@@ -9,7 +9,7 @@ use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray};
+use crate::ray::{Hit, PreparedRay, Ray, NEAR_MISS_TOLERANCE};
 
 /// The grid's knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,8 +51,9 @@ impl Default for GridParams {
 ///
 /// # Guarantees
 /// - every non-degenerate triangle is listed in every cell it overlaps, where "overlaps" is tested
-///   against the cell enlarged by a small margin (1/128 of a cell plus a few ulps of the coordinates),
-///   so rounding in the traversal can never skip a triangle that the shared test would hit;
+///   against the cell enlarged by a margin (1/128 of a cell plus twice the triangle test's near-miss
+///   allowance), so neither rounding in the traversal nor the allowance can skip a triangle that the
+///   shared test would hit, for ray origins up to ~1000 box diagonals away;
 /// - each cell's list is sorted by primitive id;
 /// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at `refs.len()`.
 #[derive(Debug)]
@@ -107,7 +108,7 @@ impl UniformGrid {
         let cell_size = (bounds.max - bounds.min) / resf;
         let inv_cell_size = resf / (bounds.max - bounds.min);
         let abs_scale = bounds.min.abs().max(bounds.max.abs()).max_element();
-        let margin = cell_size * (1.0 / 128.0) + Vec3::splat(abs_scale * f32::EPSILON * 64.0);
+        let margin = cell_size * (1.0 / 128.0) + Vec3::splat(abs_scale * 2.0 * NEAR_MISS_TOLERANCE);
         let mut grid = UniformGrid {
             bounds,
             res,
@@ -370,7 +371,9 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
     let max_ext = ext.max_element();
     let abs_scale = tight.min.abs().max(tight.max.abs()).max_element();
     // Pad so that triangles on the box faces lie strictly inside and flat scenes get a thin slab.
-    let pad = max_ext * (1.0 / 4096.0) + abs_scale * f32::EPSILON * 16.0 + f32::MIN_POSITIVE;
+    // The pad also covers the triangle test's near-miss allowance, so a ray that grazes a triangle on
+    // the box's face is not clipped away.
+    let pad = max_ext * (1.0 / 1024.0) + abs_scale * 2.0 * NEAR_MISS_TOLERANCE + f32::MIN_POSITIVE;
     let bounds = Aabb {
         min: tight.min - Vec3::splat(pad),
         max: tight.max + Vec3::splat(pad),

@@ -1,0 +1,154 @@
+//! Every structure returns the brute-force hit, bit for bit, on every ray of every test scene.
+
+mod common;
+
+use common::{assert_agrees, bundled, mesh_of, reference_hits, test_rays};
+use rayq::mesh::MeshData;
+use rayq::procedural;
+use rayq::{GridParams, MemoryBudget, UniformGrid};
+
+const GRIDS: [(&str, GridParams); 4] = [
+    ("default", GridParams::DEFAULT),
+    ("coarse", GridParams::COARSE),
+    ("fine", GridParams::FINE),
+    (
+        "bbox-only",
+        GridParams {
+            density: 2.0,
+            exact_overlap: false,
+        },
+    ),
+];
+
+fn check(name: &str, data: &MeshData, side: usize, adversarial: usize) {
+    let mesh = mesh_of(data);
+    let rays = test_rays(
+        &mesh,
+        side,
+        adversarial,
+        0x5eed ^ data.triangle_count() as u64,
+    );
+    let want = reference_hits(&mesh, &rays);
+    for (label, params) in GRIDS {
+        let grid =
+            UniformGrid::build(&mesh, &params, &mut MemoryBudget::new(0)).expect("grid builds");
+        let hits = assert_agrees(&format!("{name}/{label}"), &mesh, &grid, &rays, &want);
+        if !mesh.is_empty() {
+            assert!(
+                hits > 0,
+                "{name}: no ray hit anything, the test would prove nothing"
+            );
+        }
+    }
+}
+
+macro_rules! bundled_scene {
+    ($test:ident, $file:literal) => {
+        #[test]
+        fn $test() {
+            check($file, &bundled($file), 20, 1200);
+        }
+    };
+}
+
+bundled_scene!(teapot, "teapot");
+bundled_scene!(fandisk, "fandisk");
+bundled_scene!(spd_tetra, "spd_tetra");
+bundled_scene!(spd_teapot, "spd_teapot");
+bundled_scene!(xwing_slivers, "xwing");
+bundled_scene!(f15, "f15");
+bundled_scene!(stadium_teapot, "stadium_teapot");
+
+#[test]
+fn procedural_scenes() {
+    for name in procedural::NAMES {
+        let data = procedural::by_name(name, 1500).expect("known name");
+        check(name, &data, 16, 800);
+    }
+}
+
+#[test]
+fn tiny_and_offset_scenes() {
+    let base = procedural::closed_sphere(8);
+    for (label, scale, offset) in [
+        ("unit", 1.0, [0.0; 3]),
+        ("tiny 1e-6", 1e-6, [0.0; 3]),
+        ("offset 1e4", 1.0, [1e4, -2e4, 3e4]),
+        ("huge 1e7 extent", 1e7, [0.0; 3]),
+    ] {
+        check(label, &base.transformed(scale, offset), 16, 800);
+    }
+}
+
+#[test]
+fn one_and_two_triangles_and_empty() {
+    let one = MeshData {
+        vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        indices: vec![[0, 1, 2]],
+    };
+    check("one triangle", &one, 8, 400);
+    let two = MeshData {
+        vertices: vec![
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.0],
+            [0.0, 1.0, 0.0],
+            [1.0, 1.0, 0.0],
+        ],
+        indices: vec![[0, 1, 2], [2, 1, 3]],
+    };
+    check("two triangles", &two, 8, 400);
+    check("empty", &MeshData::default(), 4, 16);
+}
+
+#[test]
+fn duplicate_and_coplanar_triangles_tie_to_the_lowest_id() {
+    let mut data = procedural::random_soup(200, 7, 0.2);
+    let copy = data.clone();
+    data.append(&copy);
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 16, 400, 3);
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    assert_agrees(
+        "duplicates",
+        &mesh,
+        &grid,
+        &rays,
+        &reference_hits(&mesh, &rays),
+    );
+    for r in &rays {
+        let h = rayq::accel::RayQuery::intersect(&grid, &mesh, r);
+        assert!(
+            !h.is_hit() || h.prim < 200,
+            "a duplicate with the higher id won a tie: {h:?}"
+        );
+    }
+}
+
+#[test]
+fn axis_aligned_sheets_on_cell_boundaries() {
+    // Sheets at x = k/4 inside a unit box: with 4 cells per axis they lie exactly on cell planes.
+    let mut data = MeshData::default();
+    for k in 0..=4 {
+        let x = k as f32 / 4.0;
+        let base = data.vertices.len() as u32;
+        data.vertices
+            .extend([[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]]);
+        data.indices
+            .extend([[base, base + 1, base + 2], [base + 2, base + 1, base + 3]]);
+    }
+    check("sheets", &data, 16, 800);
+}
+
+#[test]
+fn all_triangles_in_one_cell() {
+    let mut data = procedural::random_soup(300, 11, 0.01).transformed(1e-3, [0.5, 0.5, 0.5]);
+    data.append(&MeshData {
+        vertices: vec![
+            [-10.0, -10.0, -10.0],
+            [10.0, -10.0, -10.0],
+            [-10.0, 10.0, 10.0],
+        ],
+        indices: vec![[0, 1, 2]],
+    });
+    check("one cell", &data, 16, 800);
+}
