@@ -8,6 +8,8 @@
 //! Start with [`Scene::build`], or with [`UniformGrid::build`] when you want one structure directly.
 #![no_std]
 #![warn(missing_docs)]
+// `!(a <= b)` is how this crate says "false when either side is NaN"; it is deliberate.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
 
 #[cfg(not(any(feature = "std", feature = "libm")))]
 compile_error!("rayq needs float math: enable feature `std` (default) or feature `libm`");
@@ -41,3 +43,8 @@ pub use mesh::TriMesh;
 pub use ray::{Hit, Ray};
 pub use scene::{BuildOptions, Scene, Structure};
 pub use select::calibration::Calibration;
+
+/// The README's Rust example is compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+struct ReadmeDoctests;
