@@ -237,10 +237,11 @@ const char *rq_version_string(void);
 rq_status rq_calibration_from_bytes(const uint8_t *data, size_t len, struct rq_calibration **out);
 
 // Writes the blob of `calib` into `buf` (capacity `cap`); `*written` receives its length. A buffer
-// that is too small gives `RQ_STATUS_INVALID_ARGUMENT` and writes nothing.
+// that is too small gives `RQ_STATUS_INVALID_ARGUMENT` and writes nothing. Size query: with
+// `buf == NULL` and `cap == 0`, only `*written` receives the size the blob needs.
 //
 // # Safety
-// `calib` is a live handle; `buf` writable for `cap` bytes; `written` writable.
+// `calib` is a live handle; `buf` NULL or writable for `cap` bytes; `written` writable.
 rq_status rq_calibration_to_bytes(const struct rq_calibration *calib,
                                   uint8_t *buf,
                                   size_t cap,
@@ -325,7 +326,8 @@ bool rq_scene_intersect(const struct rq_scene *scene, const struct rq_ray *ray, 
 // `scene` is NULL or a live handle; `ray` NULL or readable.
 bool rq_scene_occluded(const struct rq_scene *scene, const struct rq_ray *ray);
 
-// Closest hits of `n` rays into `hits[0..n]` (the two arrays must not overlap). `n == 0` is a no-op.
+// Closest hits of `n` rays into `hits[0..n]` (the two arrays must not overlap). With a valid scene,
+// `n == 0` is a no-op that accepts NULL arrays; a NULL scene is always `RQ_STATUS_NULL_ARGUMENT`.
 //
 // # Safety
 // `rays` readable and `hits` writable for `n` elements when `n > 0`.

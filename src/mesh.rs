@@ -20,6 +20,9 @@ use crate::error::{BuildError, MeshError};
 #[derive(Debug)]
 pub struct TriMesh {
     tris: Vec<[Vec3; 3]>,
+    /// Bit `i % 32` of word `i / 32` is set when triangle `i` is degenerate (decided once, here, so
+    /// that structures and queries never recompute it).
+    degenerate_bits: Vec<u32>,
     bounds: Aabb,
     degenerate: usize,
 }
@@ -91,33 +94,45 @@ impl TriMesh {
             }
         }
         let mut tris = budget.vec::<[Vec3; 3]>(n, "mesh triangles")?;
-        let mut bounds = Aabb::EMPTY;
+        let mut degenerate_bits = match budget.filled(n.div_ceil(32), 0u32, "mesh degenerate flags")
+        {
+            Ok(b) => b,
+            Err(e) => {
+                budget.free(tris);
+                return Err(e);
+            }
+        };
+        let mut lo = Vec3::splat(f32::INFINITY);
+        let mut hi = Vec3::splat(f32::NEG_INFINITY);
         let mut degenerate = 0;
         for i in 0..n {
             let idx = src.triangle(i);
-            let mut tri = [Vec3::ZERO; 3];
-            for (k, &vi) in idx.iter().enumerate() {
-                if vi as usize >= nv {
-                    budget.free(tris);
-                    return Err(MeshError::IndexOutOfRange {
-                        triangle: i,
-                        index: vi,
-                        vertex_count: nv,
-                    }
-                    .into());
+            if let Some(&vi) = idx.iter().find(|&&vi| vi as usize >= nv) {
+                budget.free(tris);
+                budget.free(degenerate_bits);
+                return Err(MeshError::IndexOutOfRange {
+                    triangle: i,
+                    index: vi,
+                    vertex_count: nv,
                 }
-                tri[k] = Vec3::from(src.vertex(vi as usize));
+                .into());
             }
+            let tri = idx.map(|vi| Vec3::from(src.vertex(vi as usize)));
             if is_degenerate(&tri) {
                 degenerate += 1;
+                if let Some(w) = degenerate_bits.get_mut(i / 32) {
+                    *w |= 1 << (i % 32);
+                }
             } else {
-                bounds = bounds.grow(tri[0]).grow(tri[1]).grow(tri[2]);
+                lo = lo.min(tri[0]).min(tri[1]).min(tri[2]);
+                hi = hi.max(tri[0]).max(tri[1]).max(tri[2]);
             }
             tris.push(tri);
         }
         Ok(TriMesh {
             tris,
-            bounds,
+            degenerate_bits,
+            bounds: Aabb { min: lo, max: hi },
             degenerate,
         })
     }
@@ -154,8 +169,19 @@ impl TriMesh {
 
     /// True when triangle `prim` can never be hit (repeated or collinear vertices); structures leave
     /// such triangles out.
+    #[inline]
     pub fn is_degenerate(&self, prim: u32) -> bool {
-        self.tris.get(prim as usize).map_or(true, is_degenerate)
+        self.degenerate_bits
+            .get(prim as usize / 32)
+            .map_or(true, |w| w & (1 << (prim % 32)) != 0)
+            || prim as usize >= self.tris.len()
+    }
+
+    /// The degenerate flags: bit `i % 32` of word `i / 32` is set when triangle `i` is degenerate
+    /// (`triangles().len().div_ceil(32)` words; bits past the last triangle are clear).
+    #[inline]
+    pub fn degenerate_bits(&self) -> &[u32] {
+        &self.degenerate_bits
     }
 
     /// How many triangles are degenerate.
@@ -168,19 +194,32 @@ impl TriMesh {
         self.bounds
     }
 
+    /// The largest coordinate magnitude of the non-degenerate triangles (`+∞` when there are none):
+    /// what structures pass to the triangle test's per-ray bound.
+    #[inline]
+    pub fn coordinate_bound(&self) -> f32 {
+        self.bounds
+            .min
+            .abs()
+            .max(self.bounds.max.abs())
+            .max_element()
+    }
+
     /// Bytes this mesh holds.
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.tris)
+        bytes_of(&self.tris) + bytes_of(&self.degenerate_bits)
     }
 
     /// Gives the copy's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.tris);
+        budget.free(self.degenerate_bits);
     }
 }
 
 /// Zero area, decided exactly enough that every structure agrees: the edge cross product, computed in
 /// f64 from the f32 coordinates, is exactly zero.
+#[inline]
 fn is_degenerate(t: &[Vec3; 3]) -> bool {
     let e1 = t[1].as_dvec3() - t[0].as_dvec3();
     let e2 = t[2].as_dvec3() - t[0].as_dvec3();

@@ -2,7 +2,7 @@
 
 use crate::accel::{Aabb, RayQuery};
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray};
+use crate::ray::{Hit, PreparedRay, Ray, TriangleLoop, TriangleTest};
 
 /// Tests every non-degenerate triangle. Slow and obviously right: the other structures are checked
 /// against it bit for bit.
@@ -20,6 +20,48 @@ impl BruteForce {
     }
 }
 
+/// The loop over every triangle, run with the test specialised for the ray's axes.
+struct AllTriangles<'a> {
+    mesh: &'a TriMesh,
+    /// Stop at the first hit (for `occluded`).
+    any: bool,
+}
+
+impl TriangleLoop for AllTriangles<'_> {
+    type Output = Hit;
+
+    #[inline(always)]
+    fn run<T: TriangleTest>(self, test: T) -> Hit {
+        let mut best = Hit::MISS;
+        let tris = self.mesh.triangles();
+        let bits = self.mesh.degenerate_bits();
+        // 32 triangles per word of degenerate flags; the last chunk may be shorter.
+        for (chunk_index, (chunk, &flags)) in tris.chunks(32).zip(bits).enumerate() {
+            let base = chunk_index * 32;
+            for (k, tri) in chunk.iter().enumerate() {
+                if flags & (1 << k) != 0 {
+                    continue;
+                }
+                if let Some((t, u, v)) = test.test(tri) {
+                    let h = Hit {
+                        t,
+                        u,
+                        v,
+                        prim: (base + k) as u32,
+                    };
+                    if h.beats(&best) {
+                        best = h;
+                        if self.any {
+                            return best;
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
 impl RayQuery for BruteForce {
     fn bounds(&self) -> Aabb {
         self.bounds
@@ -29,27 +71,15 @@ impl RayQuery for BruteForce {
         let Some(r) = PreparedRay::new(ray) else {
             return Hit::MISS;
         };
-        let mut best = Hit::MISS;
-        for (i, t) in mesh.triangles().iter().enumerate() {
-            if mesh.is_degenerate(i as u32) {
-                continue;
-            }
-            if let Some((t, u, v)) = r.intersect_triangle(t[0], t[1], t[2]) {
-                let h = Hit {
-                    t,
-                    u,
-                    v,
-                    prim: i as u32,
-                };
-                if h.beats(&best) {
-                    best = h;
-                }
-            }
-        }
-        best
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(AllTriangles { mesh, any: false })
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        self.intersect(mesh, ray).is_hit()
+        let Some(r) = PreparedRay::new(ray) else {
+            return false;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(AllTriangles { mesh, any: true }).is_hit()
     }
 }

@@ -2,14 +2,14 @@
 //! traversal that visits cells front to back.
 
 use alloc::vec::Vec;
-use glam::{DVec3, Vec3};
+use glam::Vec3;
 
 use crate::accel::{Aabb, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray, NEAR_MISS_TOLERANCE};
+use crate::ray::{Hit, PreparedRay, Ray, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE};
 
 /// The grid's knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -51,9 +51,9 @@ impl Default for GridParams {
 ///
 /// # Guarantees
 /// - every non-degenerate triangle is listed in every cell it overlaps, where "overlaps" is tested
-///   against the cell enlarged by a margin (1/128 of a cell plus twice the triangle test's near-miss
+///   against the cell enlarged by a margin (1/64 of a cell plus twice the triangle test's near-miss
 ///   allowance), so neither rounding in the traversal nor the allowance can skip a triangle that the
-///   shared test would hit, for ray origins up to ~1000 box diagonals away;
+///   shared test would hit, for ray origins within ~4000 cells of the grid (docs/design.md);
 /// - each cell's list is sorted by primitive id;
 /// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at `refs.len()`.
 #[derive(Debug)]
@@ -108,7 +108,7 @@ impl UniformGrid {
         let cell_size = (bounds.max - bounds.min) / resf;
         let inv_cell_size = resf / (bounds.max - bounds.min);
         let abs_scale = bounds.min.abs().max(bounds.max.abs()).max_element();
-        let margin = cell_size * (1.0 / 128.0) + Vec3::splat(abs_scale * 2.0 * NEAR_MISS_TOLERANCE);
+        let margin = cell_size * (1.0 / 64.0) + Vec3::splat(abs_scale * 2.0 * NEAR_MISS_TOLERANCE);
         let mut grid = UniformGrid {
             bounds,
             res,
@@ -121,16 +121,56 @@ impl UniformGrid {
 
         let geometry = grid.geometry();
         let mut counts = budget.filled(cells + 1, 0u32, "grid cell offsets")?;
-        let mut overflow = false;
-        for (prim, tri) in mesh.triangles().iter().enumerate() {
-            if mesh.is_degenerate(prim as u32) {
-                continue;
+        // Per triangle, what the fill pass needs to repeat the count pass without recomputing it:
+        // the first cell of its footprint and, for footprints of at most 3 cells per axis and 24
+        // cells, which of them it overlaps plus the footprint's shape (see `pack`). 8 bytes per
+        // triangle, given back before returning.
+        let mut records = match budget.filled(mesh.len(), [0u32; 2], "grid build scratch") {
+            Ok(m) => m,
+            Err(e) => {
+                budget.free(counts);
+                return Err(e);
             }
-            grid_cells(&geometry, tri, params.exact_overlap, |c| {
-                let n = &mut counts[c];
+        };
+        let exact = params.exact_overlap;
+        let tris = mesh.triangles();
+        let degenerate = mesh.degenerate_bits();
+        let live = |prim: usize| {
+            degenerate
+                .get(prim / 32)
+                .is_some_and(|w| w & (1 << (prim % 32)) == 0)
+        };
+        let (rx, rxy) = (res[0] as usize, res[0] as usize * res[1] as usize);
+        let mut overflow = false;
+        let mut count = |cell: usize| {
+            if let Some(n) = counts.get_mut(cell) {
                 *n = n.wrapping_add(1);
                 overflow |= *n == 0;
-            });
+            }
+        };
+        for (prim, (tri, record)) in tris.iter().zip(records.iter_mut()).enumerate() {
+            if !live(prim) {
+                continue;
+            }
+            let fp = Footprint::of(&geometry, tri);
+            let base = fp.lo[0] as usize + fp.lo[1] as usize * rx + fp.lo[2] as usize * rxy;
+            if let Some(shape) = fp.shape() {
+                let mask = footprint_mask(&geometry, tri, &fp, exact);
+                for_cells(base, fp.n, rx, rxy, |bit, cell| {
+                    if mask & (1 << bit) != 0 {
+                        count(cell);
+                    }
+                });
+                *record = [base as u32, mask | shape];
+            } else {
+                *record = [0, RECOMPUTE];
+                let filter = Filter::new(&geometry, tri, &fp, exact);
+                fp.for_each(&geometry, |cell, x, y, z| {
+                    if filter.overlaps(&geometry, x, y, z) {
+                        count(cell);
+                    }
+                });
+            }
         }
         // Inclusive prefix sums: counts[c] becomes the end of cell c's list.
         let mut total: u64 = 0;
@@ -138,32 +178,57 @@ impl UniformGrid {
             total += u64::from(*n);
             if overflow || total > u64::from(u32::MAX) {
                 budget.free(counts);
+                budget.free(records);
                 return Err(BuildError::CapacityExceeded {
                     what: "grid references",
                 });
             }
             *n = total as u32;
         }
-        counts[cells] = total as u32;
-        let refs = match budget.filled(total as usize, 0u32, "grid references") {
+        if let Some(end) = counts.get_mut(cells) {
+            *end = total as u32;
+        }
+        let mut refs = match budget.filled(total as usize, 0u32, "grid references") {
             Ok(r) => r,
             Err(e) => {
                 budget.free(counts);
+                budget.free(records);
                 return Err(e);
             }
         };
-        grid.refs = refs;
-        // Filling backwards leaves each list sorted by primitive id and counts[c] at its start.
-        for (prim, tri) in mesh.triangles().iter().enumerate().rev() {
-            if mesh.is_degenerate(prim as u32) {
+        // Filling backwards leaves each list sorted by primitive id and counts[c] at its start. The
+        // fill visits exactly the cells the count did: from the record when it has the mask, by the
+        // same overlap tests otherwise.
+        let mut fill = |cell: usize, prim: usize| {
+            if let Some(n) = counts.get_mut(cell) {
+                *n = n.wrapping_sub(1);
+                if let Some(r) = refs.get_mut(*n as usize) {
+                    *r = prim as u32;
+                }
+            }
+        };
+        for (prim, (tri, &[base, packed])) in tris.iter().zip(records.iter()).enumerate().rev() {
+            if !live(prim) {
                 continue;
             }
-            let refs = &mut grid.refs;
-            grid_cells(&geometry, tri, params.exact_overlap, |c| {
-                counts[c] -= 1;
-                refs[counts[c] as usize] = prim as u32;
-            });
+            if packed & RECOMPUTE == 0 {
+                for_cells(base as usize, unpack_shape(packed), rx, rxy, |bit, cell| {
+                    if packed & (1 << bit) != 0 {
+                        fill(cell, prim);
+                    }
+                });
+            } else {
+                let fp = Footprint::of(&geometry, tri);
+                let filter = Filter::new(&geometry, tri, &fp, exact);
+                fp.for_each(&geometry, |cell, x, y, z| {
+                    if filter.overlaps(&geometry, x, y, z) {
+                        fill(cell, prim);
+                    }
+                });
+            }
         }
+        budget.free(records);
+        grid.refs = refs;
         grid.offsets = counts;
         Ok(grid)
     }
@@ -196,16 +261,30 @@ impl UniformGrid {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
-        self.closest::<true>(mesh, ray, work)
+        let Some(r) = PreparedRay::new(ray) else {
+            return Hit::MISS;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<true, false> {
+            grid: self,
+            mesh,
+            work,
+        })
     }
 
     fn geometry(&self) -> Geometry {
+        let min = self.bounds.min;
+        let size = self.cell_size;
+        // The enlarged cell's half extent as the overlap test has always taken it (rounded in f32).
+        let half = 0.5 * size + self.margin;
         Geometry {
-            min: self.bounds.min,
+            min,
             res: self.res,
-            cell_size: self.cell_size,
             inv: self.inv_cell_size,
             margin: self.margin,
+            min64: [min.x, min.y, min.z].map(f64::from),
+            size64: [size.x, size.y, size.z].map(f64::from),
+            half64: [half.x, half.y, half.z].map(f64::from),
         }
     }
 
@@ -215,47 +294,80 @@ impl UniformGrid {
         let hi = self.offsets.get(cell + 1).copied().unwrap_or(0) as usize;
         self.refs.get(lo..hi).unwrap_or(&[])
     }
+}
 
-    #[inline(always)]
-    fn closest<const COUNT: bool>(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
+impl RayQuery for UniformGrid {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
         let Some(r) = PreparedRay::new(ray) else {
             return Hit::MISS;
         };
-        let mut best = Hit::MISS;
-        self.walk(&r, |cell, t_exit| {
-            let prims = self.cell_prims(cell);
-            if COUNT {
-                work.cells += 1;
-                work.tests += prims.len() as u32;
-            }
-            for &prim in prims {
-                let Some(t) = mesh.triangle(prim) else {
-                    continue;
-                };
-                if let Some((t, u, v)) = r.intersect_triangle(t[0], t[1], t[2]) {
-                    let h = Hit { t, u, v, prim };
-                    if h.beats(&best) {
-                        best = h;
-                    }
-                }
-            }
-            // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit
-            // inside the cell cannot be beaten.
-            best.t <= t_exit
-        });
-        best
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<false, false> {
+            grid: self,
+            mesh,
+            work: &mut GridWork::default(),
+        })
     }
 
-    /// Visits the cells the ray passes through inside `[tmin, tmax]`, front to back, until `visit`
-    /// returns true. `visit` gets the cell index and the ray parameter where the ray leaves the cell.
+    fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
+        let Some(r) = PreparedRay::new(ray) else {
+            return false;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<false, true> {
+            grid: self,
+            mesh,
+            work: &mut GridWork::default(),
+        })
+        .is_hit()
+    }
+}
+
+/// One query's walk through the grid: a 3D-DDA that visits the cells the ray passes through inside
+/// `[tmin, tmax]`, front to back, and tests each cell's triangles with the test specialised for the
+/// ray's axes. `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
+struct Walk<'a, const COUNT: bool, const ANY: bool> {
+    grid: &'a UniformGrid,
+    mesh: &'a TriMesh,
+    work: &'a mut GridWork,
+}
+
+/// Whether a cell's triangles are all touched (loaded) before the first is tested, so that their
+/// cache misses overlap instead of following one another.
+const PREFETCH: bool = true;
+
+/// 2^100: scales a direction whose components are all too small to invert in f32 into one that is
+/// not, without rounding (a power of two), so the DDA follows the same line.
+const TINY_DIRECTION_SCALE: f32 = 1.267_650_6e30;
+
+impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
+    type Output = Hit;
+
     #[inline(always)]
-    fn walk(&self, r: &PreparedRay, mut visit: impl FnMut(usize, f32) -> bool) {
-        if self.offsets.is_empty() {
-            return;
+    fn run<T: TriangleTest>(self, test: T) -> Hit {
+        let Walk { grid, mesh, work } = self;
+        let r = test.ray();
+        let mut best = Hit::MISS;
+        if grid.offsets.is_empty() {
+            return best;
         }
-        let (o, d) = (r.org, r.dir);
-        let mut t0 = r.tmin;
-        let mut t1 = r.tmax;
+        let (o, mut d) = (r.org, r.dir);
+        let (mut t0, mut t1) = (r.tmin, r.tmax);
+        // When no component of the direction can be inverted (all below ~3e-39), the ray still moves
+        // through the grid over its f32 range of t. Walk the same line with a scaled direction, over
+        // the whole box and without the early exit, whose t would be in the wrong units.
+        let inverts = |d: Vec3| (0..3).any(|a| (1.0 / d[a]).is_finite());
+        let early_exit = inverts(d);
+        if !early_exit {
+            d *= TINY_DIRECTION_SCALE;
+            t0 = -f32::INFINITY;
+            t1 = f32::INFINITY;
+        }
+        let (lo, hi) = (grid.bounds.min, grid.bounds.max);
         let mut inv = [0.0f32; 3];
         let mut moving = [false; 3];
         for a in 0..3 {
@@ -263,65 +375,134 @@ impl UniformGrid {
             if ia.is_finite() {
                 inv[a] = ia;
                 moving[a] = true;
-                let ta = (self.bounds.min[a] - o[a]) * ia;
-                let tb = (self.bounds.max[a] - o[a]) * ia;
+                let ta = (lo[a] - o[a]) * ia;
+                let tb = (hi[a] - o[a]) * ia;
                 t0 = t0.max(ta.min(tb));
                 t1 = t1.min(ta.max(tb));
-            } else if o[a] < self.bounds.min[a] || o[a] > self.bounds.max[a] {
-                return;
+            } else if o[a] < lo[a] || o[a] > hi[a] {
+                return best;
             }
         }
         if !(t0 <= t1) {
-            return;
+            return best;
         }
+        // The cell of the entry point, and per axis: the step, the cell index where the walk leaves
+        // the grid, the change of the flat index, and the t of the next cell boundary. Non-moving
+        // axes have `t_next = ∞` and are never stepped. Arrays have a fourth, unused slot so that
+        // an index `& 3` needs no bounds check.
         let t_start = t0.clamp(-f32::MAX, f32::MAX);
-        let mut cell = [0i64; 3];
-        let mut step = [0i64; 3];
-        let mut t_next = [f32::INFINITY; 3];
-        for a in 0..3 {
+        let res = grid.res;
+        let strides = [
+            1i64,
+            i64::from(res[0]),
+            i64::from(res[0]) * i64::from(res[1]),
+            0,
+        ];
+        let mut cell = [0i64; 4];
+        let mut step = [0i64; 4];
+        let mut up = [0i64; 4];
+        let mut end = [0i64; 4];
+        let mut t_next = [f32::INFINITY; 4];
+        let mut plane_min = [0.0f32; 4];
+        let mut plane_size = [0.0f32; 4];
+        let mut org = [0.0f32; 4];
+        let mut inv4 = [0.0f32; 4];
+        let mut first_moving = 0;
+        let mut moving_mask = 0u32;
+        for a in (0..3).rev() {
             let p = o[a] + t_start * d[a];
-            let c = math::floor((p - self.bounds.min[a]) * self.inv_cell_size[a]);
-            let last = self.res[a] as i64 - 1;
+            let c = math::floor((p - lo[a]) * grid.inv_cell_size[a]);
+            let last = i64::from(res[a]) - 1;
             cell[a] = if c.is_nan() {
                 0
             } else {
                 (c.clamp(-1.0, last as f32 + 1.0) as i64).clamp(0, last)
             };
+            plane_min[a] = lo[a];
+            plane_size[a] = grid.cell_size[a];
+            org[a] = o[a];
+            inv4[a] = inv[a];
             if moving[a] {
-                step[a] = if d[a] > 0.0 { 1 } else { -1 };
-                t_next[a] = self.boundary_t(a, cell[a] + i64::from(d[a] > 0.0), o[a], inv[a]);
+                first_moving = a;
+                moving_mask |= 1 << a;
+                let is_up = d[a] > 0.0;
+                step[a] = if is_up { 1 } else { -1 };
+                up[a] = i64::from(is_up);
+                end[a] = if is_up { last + 1 } else { -1 };
+                t_next[a] = grid.boundary_t(a, cell[a] + up[a], o[a], inv[a]);
             }
         }
-        let (rx, rxy) = (
-            self.res[0] as usize,
-            self.res[0] as usize * self.res[1] as usize,
-        );
+        let delta = [
+            step[0] * strides[0],
+            step[1] * strides[1],
+            step[2] * strides[2],
+            0,
+        ];
+        let mut index = cell[0] + cell[1] * strides[1] + cell[2] * strides[2];
         loop {
-            let index = cell[0] as usize + cell[1] as usize * rx + cell[2] as usize * rxy;
-            let axis = if t_next[0] <= t_next[1] && t_next[0] <= t_next[2] {
-                0
-            } else if t_next[1] <= t_next[2] {
-                1
-            } else {
-                2
-            };
-            let t_exit = t_next[axis].min(t1);
-            if visit(index, t_exit) || t_next[axis] > t1 {
-                return;
+            // The axis whose boundary comes first (ties to the lower axis), without branches. A
+            // non-moving axis has t = ∞ and is chosen only when every moving axis is at ∞ too (t
+            // overflowed); step the first moving axis then, as the walk must still advance.
+            let (tx, ty, tz) = (t_next[0], t_next[1], t_next[2]);
+            let not_x = !(tx <= ty && tx <= tz);
+            let mut axis = usize::from(not_x) * (1 + usize::from(!(ty <= tz)));
+            if moving_mask & (1 << axis) == 0 {
+                axis = first_moving;
             }
+            let axis = axis & 3;
+            let t_axis = t_next[axis];
+            let t_exit = t_axis.min(t1);
+            let prims = usize::try_from(index).map_or(&[][..], |i| grid.cell_prims(i));
+            if COUNT {
+                work.cells += 1;
+                work.tests += prims.len() as u32;
+            }
+            if PREFETCH {
+                // Touch every triangle of the cell first so that their cache misses overlap.
+                let mut acc = 0.0f32;
+                for &prim in prims {
+                    if let Some(tri) = mesh.triangle(prim) {
+                        acc += tri[0].x;
+                    }
+                }
+                core::hint::black_box(acc);
+            }
+            for &prim in prims {
+                let Some(tri) = mesh.triangle(prim) else {
+                    continue;
+                };
+                if let Some((t, u, v)) = test.test(tri) {
+                    let h = Hit { t, u, v, prim };
+                    if ANY {
+                        return h;
+                    }
+                    if h.beats(&best) {
+                        best = h;
+                    }
+                }
+            }
+            // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit
+            // inside the cell cannot be beaten.
+            if early_exit && best.t <= t_exit {
+                return best;
+            }
+            if t_axis > t1 {
+                return best;
+            }
+            // Step to the neighbour across the boundary; its far boundary is computed from the
+            // plane's position (no accumulated error), as `boundary_t` does.
             cell[axis] += step[axis];
-            if cell[axis] < 0 || cell[axis] >= self.res[axis] as i64 {
-                return;
+            if cell[axis] == end[axis] {
+                return best;
             }
-            t_next[axis] = self.boundary_t(
-                axis,
-                cell[axis] + i64::from(step[axis] > 0),
-                o[axis],
-                inv[axis],
-            );
+            index += delta[axis];
+            let x = plane_min[axis] + (cell[axis] + up[axis]) as f32 * plane_size[axis];
+            t_next[axis] = (x - org[axis]) * inv4[axis];
         }
     }
+}
 
+impl UniformGrid {
     /// Ray parameter at the plane between cells `k - 1` and `k` on `axis`, computed from the plane's
     /// position each time (no accumulated error).
     #[inline(always)]
@@ -331,38 +512,18 @@ impl UniformGrid {
     }
 }
 
-impl RayQuery for UniformGrid {
-    fn bounds(&self) -> Aabb {
-        self.bounds
-    }
-
-    fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        self.closest::<false>(mesh, ray, &mut GridWork::default())
-    }
-
-    fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        let Some(r) = PreparedRay::new(ray) else {
-            return false;
-        };
-        let mut hit = false;
-        self.walk(&r, |cell, _| {
-            hit = self.cell_prims(cell).iter().any(|&prim| {
-                mesh.triangle(prim)
-                    .is_some_and(|t| r.intersect_triangle(t[0], t[1], t[2]).is_some())
-            });
-            hit
-        });
-        hit
-    }
-}
-
 /// What the build needs of the grid's shape, copied out so the fill pass can borrow `refs` mutably.
 struct Geometry {
     min: Vec3,
     res: [u32; 3],
-    cell_size: Vec3,
     inv: Vec3,
     margin: Vec3,
+    /// `min` in f64.
+    min64: [f64; 3],
+    /// The cell size in f64.
+    size64: [f64; 3],
+    /// Half a cell plus the margin (the enlarged cell's half extent), in f64.
+    half64: [f64; 3],
 }
 
 /// The padded box and cells per axis for `live` triangles in `tight` at density `lambda`.
@@ -421,66 +582,394 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
     Ok((bounds, res))
 }
 
-/// Calls `visit` with the index of every cell triangle `tri` overlaps (with the margin).
-fn grid_cells(g: &Geometry, tri: &[Vec3; 3], exact: bool, mut visit: impl FnMut(usize)) {
-    let bb = Aabb::of_triangle(tri);
-    let lo = cell_range(g, bb.min - g.margin);
-    let hi = cell_range(g, bb.max + g.margin);
-    let (rx, rxy) = (g.res[0] as usize, g.res[0] as usize * g.res[1] as usize);
-    let spans = (0..3).filter(|&a| hi[a] > lo[a]).count();
-    let test = exact && spans >= 2;
-    for z in lo[2]..=hi[2] {
-        for y in lo[1]..=hi[1] {
-            for x in lo[0]..=hi[0] {
-                if test {
-                    let cmin = g.min + Vec3::new(x as f32, y as f32, z as f32) * g.cell_size;
-                    let center = (cmin + 0.5 * g.cell_size).as_dvec3();
-                    let half = (0.5 * g.cell_size + g.margin).as_dvec3();
-                    if !triangle_overlaps_box(tri, center, half) {
-                        continue;
-                    }
+/// The cells a triangle's bounds, enlarged by the margin, cover: `n[a]` cells from `lo[a]` on each
+/// axis.
+struct Footprint {
+    lo: [u32; 3],
+    n: [u32; 3],
+}
+
+/// In a build record: the footprint is too large for a mask, recompute it.
+const RECOMPUTE: u32 = 1 << 31;
+
+/// Cells `n` (at most 3 per axis, at most 24 in all) starting at flat index `base`, x fastest:
+/// calls `visit(bit, cell)` with the cell's position in that order (its bit in a footprint mask).
+#[inline(always)]
+fn for_cells(base: usize, n: [u32; 3], rx: usize, rxy: usize, mut visit: impl FnMut(u32, usize)) {
+    let mut bit = 0;
+    let mut plane = base;
+    for _ in 0..n[2] {
+        let mut row = plane;
+        for _ in 0..n[1] {
+            for x in 0..n[0] as usize {
+                visit(bit, row + x);
+                bit += 1;
+            }
+            row += rx;
+        }
+        plane += rxy;
+    }
+}
+
+/// The footprint shape stored in bits 24..30 of a build record.
+#[inline(always)]
+fn unpack_shape(packed: u32) -> [u32; 3] {
+    [
+        ((packed >> 24) & 3) + 1,
+        ((packed >> 26) & 3) + 1,
+        ((packed >> 28) & 3) + 1,
+    ]
+}
+
+impl Footprint {
+    #[inline(always)]
+    fn of(g: &Geometry, tri: &[Vec3; 3]) -> Footprint {
+        // The triangle's bounds (coordinates are finite: plain comparisons give `min`/`max`).
+        let lt = |a: f32, b: f32| if a < b { a } else { b };
+        let gt = |a: f32, b: f32| if a > b { a } else { b };
+        let [p, q, r] = tri;
+        let lo = Vec3::new(
+            lt(lt(p.x, q.x), r.x),
+            lt(lt(p.y, q.y), r.y),
+            lt(lt(p.z, q.z), r.z),
+        );
+        let hi = Vec3::new(
+            gt(gt(p.x, q.x), r.x),
+            gt(gt(p.y, q.y), r.y),
+            gt(gt(p.z, q.z), r.z),
+        );
+        let lo = cell_range(g, lo - g.margin);
+        let hi = cell_range(g, hi + g.margin);
+        Footprint {
+            lo,
+            n: [
+                hi[0].saturating_sub(lo[0]) + 1,
+                hi[1].saturating_sub(lo[1]) + 1,
+                hi[2].saturating_sub(lo[2]) + 1,
+            ],
+        }
+    }
+
+    /// Bits 24..30 of a build record for this footprint, or `None` when it has more than 3 cells
+    /// on an axis or more than 24 in all (then its mask would not fit).
+    #[inline(always)]
+    fn shape(&self) -> Option<u32> {
+        let [x, y, z] = self.n;
+        (x <= 3 && y <= 3 && z <= 3 && x * y * z <= 24)
+            .then(|| ((x - 1) | ((y - 1) << 2) | ((z - 1) << 4)) << 24)
+    }
+
+    /// Calls `visit(cell, x, y, z)` for every cell of the footprint, x fastest.
+    #[inline(always)]
+    fn for_each(&self, g: &Geometry, mut visit: impl FnMut(usize, u32, u32, u32)) {
+        let (rx, rxy) = (g.res[0] as usize, g.res[0] as usize * g.res[1] as usize);
+        for z in self.lo[2]..self.lo[2] + self.n[2] {
+            for y in self.lo[1]..self.lo[1] + self.n[1] {
+                let row = y as usize * rx + z as usize * rxy;
+                for x in self.lo[0]..self.lo[0] + self.n[0] {
+                    visit(row + x as usize, x, y, z);
                 }
-                visit(x as usize + y as usize * rx + z as usize * rxy);
             }
         }
     }
 }
 
+/// Which cells of its footprint a triangle overlaps (cells enlarged by the margin), by the
+/// separating-axis theorem in f64, so that the only tolerance that matters is the margin:
+/// - a footprint one cell thick in at most one axis needs no test (every cell of a one-cell-wide
+///   row or a single cell overlaps);
+/// - one cell thick in exactly one axis, the enlarged cells of the footprint contain the triangle's
+///   whole extent along that axis, so the triangle meets a cell exactly when its projection onto the
+///   other two axes meets the cell's rectangle: three edge normals suffice (the rectangle's own axes
+///   are settled by the footprint);
+/// - otherwise the nine edge × box-axis directions and the triangle's normal (the box axes are
+///   settled by the footprint).
+///
+/// Each axis `n` is tested as "the triangle's projection `[lo, hi]` and the cell's projection
+/// `n·c ± r` are disjoint", with `lo`, `hi`, `r` computed once per triangle and only `n·c` per
+/// cell. Rounding in f64 is some 1e-16 of the coordinates, far below the margin (at least 1/64 of
+/// a cell plus 128 f32 ulps of the coordinates), so no cell that the triangle overlaps is dropped.
+// A short-lived value on the stack, one per triangle: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
+enum Filter {
+    All,
+    Flat(Axes<2, 3>),
+    Solid(Axes<3, 10>),
+}
+
+/// `N` separating axes in `D` dimensions (the footprint axes `dims`): a cell with center `c`
+/// overlaps on axis `n[i]` when `lo[i] ≤ n[i]·c ≤ hi[i]`, where `[lo, hi]` is the triangle's
+/// projection widened by the enlarged cell's projected half extent.
+struct Axes<const D: usize, const N: usize> {
+    dims: [usize; D],
+    n: [[f64; D]; N],
+    lo: [f64; N],
+    hi: [f64; N],
+}
+
+impl<const D: usize, const N: usize> Axes<D, N> {
+    fn new(g: &Geometry, dims: [usize; D], tri: &[Vec3; 3], n: [[f64; D]; N]) -> Self {
+        let v = tri.map(|p| dims.map(|a| f64::from(p[a])));
+        let dot = |n: &[f64; D], p: &[f64; D]| (0..D).fold(0.0, |s, k| s + n[k] * p[k]);
+        let mut axes = Axes {
+            dims,
+            n,
+            lo: [0.0; N],
+            hi: [0.0; N],
+        };
+        for (i, n) in n.iter().enumerate() {
+            let p = [dot(n, &v[0]), dot(n, &v[1]), dot(n, &v[2])];
+            let r = (0..D).fold(0.0, |s, k| s + n[k].abs() * g.half64[dims[k]]);
+            axes.lo[i] = p[0].min(p[1]).min(p[2]) - r;
+            axes.hi[i] = p[0].max(p[1]).max(p[2]) + r;
+        }
+        axes
+    }
+
+    /// True when the enlarged cell centered at `c` (in the axes' dimensions) overlaps.
+    #[inline(always)]
+    fn contains(&self, c: [f64; D]) -> bool {
+        let mut inside = true;
+        for i in 0..N {
+            let nc = (0..D).fold(0.0, |s, k| s + self.n[i][k] * c[k]);
+            inside &= (nc >= self.lo[i]) & (nc <= self.hi[i]);
+        }
+        inside
+    }
+
+    #[inline(always)]
+    fn overlaps(&self, g: &Geometry, cell: [u32; 3]) -> bool {
+        self.contains(
+            self.dims
+                .map(|a| g.min64[a] + (f64::from(cell[a]) + 0.5) * g.size64[a]),
+        )
+    }
+}
+
+impl Filter {
+    #[inline(always)]
+    fn new(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint, exact: bool) -> Filter {
+        let thick = fp.n.map(|n| n > 1);
+        let spans = thick.iter().filter(|&&t| t).count();
+        if !exact || spans < 2 {
+            return Filter::All;
+        }
+        Filter::tests(g, tri, thick, spans)
+    }
+
+    #[inline(never)]
+    fn tests(g: &Geometry, tri: &[Vec3; 3], thick: [bool; 3], spans: usize) -> Filter {
+        let v = tri.map(|p| [f64::from(p.x), f64::from(p.y), f64::from(p.z)]);
+        let edge = |i: usize| {
+            let (p, q) = (v[i], v[(i + 1) % 3]);
+            [q[0] - p[0], q[1] - p[1], q[2] - p[2]]
+        };
+        let e = [edge(0), edge(1), edge(2)];
+        if spans == 2 {
+            let (a, b) = match thick {
+                [false, _, _] => (1, 2),
+                [_, false, _] => (0, 2),
+                _ => (0, 1),
+            };
+            let normal = |e: [f64; 3]| [-e[b], e[a]];
+            return Filter::Flat(Axes::new(
+                g,
+                [a, b],
+                tri,
+                [normal(e[0]), normal(e[1]), normal(e[2])],
+            ));
+        }
+        let cross = |u: [f64; 3], w: [f64; 3]| {
+            [
+                u[1] * w[2] - u[2] * w[1],
+                u[2] * w[0] - u[0] * w[2],
+                u[0] * w[1] - u[1] * w[0],
+            ]
+        };
+        let (x, y, z) = ([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]);
+        Filter::Solid(Axes::new(
+            g,
+            [0, 1, 2],
+            tri,
+            [
+                // The plane first: it separates the most cells of large triangles.
+                cross(e[0], e[1]),
+                cross(x, e[0]),
+                cross(x, e[1]),
+                cross(x, e[2]),
+                cross(y, e[0]),
+                cross(y, e[1]),
+                cross(y, e[2]),
+                cross(z, e[0]),
+                cross(z, e[1]),
+                cross(z, e[2]),
+            ],
+        ))
+    }
+
+    #[inline(always)]
+    fn overlaps(&self, g: &Geometry, x: u32, y: u32, z: u32) -> bool {
+        match self {
+            Filter::All => true,
+            Filter::Flat(axes) => axes.overlaps(g, [x, y, z]),
+            Filter::Solid(axes) => axes.overlaps(g, [x, y, z]),
+        }
+    }
+}
+
+/// Which cells of footprint `fp` (at most 3 per axis) the triangle overlaps, as a mask in the order
+/// of [`for_cells`]: the tests of [`Filter`], written out for the small footprints almost every
+/// triangle has.
+#[inline(always)]
+fn footprint_mask(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint, exact: bool) -> u32 {
+    let [nx, ny, nz] = fp.n;
+    let spans = u32::from(nx > 1) + u32::from(ny > 1) + u32::from(nz > 1);
+    if !exact || spans < 2 {
+        return 1u32
+            .checked_shl(nx * ny * nz)
+            .map_or(u32::MAX, |b| b.wrapping_sub(1));
+    }
+    if spans == 2 {
+        let (a, b) = if nx == 1 {
+            (1, 2)
+        } else if ny == 1 {
+            (0, 2)
+        } else {
+            (0, 1)
+        };
+        flat_mask(g, tri, fp, a, b)
+    } else {
+        solid_mask(g, tri, fp)
+    }
+}
+
+/// Centers of the footprint's first three cells along `axis`, in f64.
+#[inline(always)]
+fn centers(g: &Geometry, fp: &Footprint, axis: usize) -> [f64; 3] {
+    let c = |i: u32| g.min64[axis] + (f64::from(fp.lo[axis] + i) + 0.5) * g.size64[axis];
+    [c(0), c(1), c(2)]
+}
+
+/// [`footprint_mask`] for a footprint one cell thick along the axis other than `a` and `b`: the
+/// triangle's projection onto the (a, b) plane against each cell's enlarged rectangle, separated
+/// only along the three edge normals.
+#[inline(never)]
+fn flat_mask(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint, a: usize, b: usize) -> u32 {
+    let p = tri.map(|v| {
+        let v = v.to_array();
+        [f64::from(v[a]), f64::from(v[b])]
+    });
+    let (ha, hb) = (g.half64[a], g.half64[b]);
+    // Per edge: normal (na, nb) and the projection interval widened by the rectangle's half extent.
+    let mut axes = [[0.0f64; 4]; 3];
+    for (i, axis) in axes.iter_mut().enumerate() {
+        let (s, e) = (p[i], p[(i + 1) % 3]);
+        let (na, nb) = (s[1] - e[1], e[0] - s[0]);
+        let d = p.map(|q| na * q[0] + nb * q[1]);
+        let r = na.abs() * ha + nb.abs() * hb;
+        *axis = [
+            na,
+            nb,
+            d[0].min(d[1]).min(d[2]) - r,
+            d[0].max(d[1]).max(d[2]) + r,
+        ];
+    }
+    let (ca, cb) = (centers(g, fp, a), centers(g, fp, b));
+    let (na, nb) = (fp.n[a].min(3) as usize, fp.n[b].min(3) as usize);
+    let mut mask = 0;
+    let mut bit = 0;
+    for &y in &cb[..nb] {
+        for &x in &ca[..na] {
+            let mut inside = true;
+            for [n0, n1, lo, hi] in axes {
+                let d = n0 * x + n1 * y;
+                inside &= (d >= lo) & (d <= hi);
+            }
+            mask |= u32::from(inside) << bit;
+            bit += 1;
+        }
+    }
+    mask
+}
+
+/// [`footprint_mask`] for a footprint more than one cell thick on every axis: the triangle's plane
+/// and the nine edge × box-axis directions.
+#[inline(never)]
+fn solid_mask(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint) -> u32 {
+    let Filter::Solid(axes) = Filter::new(g, tri, fp, true) else {
+        return u32::MAX;
+    };
+    let (cx, cy, cz) = (centers(g, fp, 0), centers(g, fp, 1), centers(g, fp, 2));
+    let [nx, ny, nz] = fp.n.map(|n| n.min(3) as usize);
+    let mut mask = 0;
+    let mut bit = 0;
+    for &z in &cz[..nz] {
+        for &y in &cy[..ny] {
+            for &x in &cx[..nx] {
+                mask |= u32::from(axes.contains([x, y, z])) << bit;
+                bit += 1;
+            }
+        }
+    }
+    mask
+}
+
+/// The cell of `p` on each axis, clamped to the grid. `floor` then clamp to `[0, res − 1]`, written
+/// as a truncation for non-negative values (equal to `floor` there; negative values and NaN clamp
+/// to 0 either way), which avoids a libm call on targets without a rounding instruction.
+#[inline(always)]
 fn cell_range(g: &Geometry, p: Vec3) -> [u32; 3] {
     let mut c = [0u32; 3];
     for a in 0..3 {
-        let f = math::floor((p[a] - g.min[a]) * g.inv[a]);
-        c[a] = f.clamp(0.0, (g.res[a] - 1) as f32) as u32;
+        let f = (p[a] - g.min[a]) * g.inv[a];
+        c[a] = if f >= 0.0 {
+            (f as u32).min(g.res[a].saturating_sub(1))
+        } else {
+            0
+        };
     }
     c
 }
 
-/// Separating-axis test of a triangle against a box (center, half extents), in f64 so that the only
-/// tolerance that matters is the margin already added to the box.
-fn triangle_overlaps_box(tri: &[Vec3; 3], center: DVec3, half: DVec3) -> bool {
-    let v = [
-        tri[0].as_dvec3() - center,
-        tri[1].as_dvec3() - center,
-        tri[2].as_dvec3() - center,
-    ];
-    let e = [v[1] - v[0], v[2] - v[1], v[0] - v[2]];
-    // The nine edge × box-axis directions.
-    for edge in &e {
-        for axis in [DVec3::X, DVec3::Y, DVec3::Z] {
-            let n = axis.cross(*edge);
-            if separates(n, &v, half) {
-                return false;
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::accel::brute::BruteForce;
+    use crate::procedural;
+
+    fn agree(mesh: &TriMesh, grid: &UniformGrid, ray: &Ray) {
+        let want = BruteForce::new(mesh).intersect(mesh, ray);
+        let got = grid.intersect(mesh, ray);
+        assert!(
+            got.same_bits(&want),
+            "{ray:?}: grid {got:?}, brute force {want:?}"
+        );
+        assert_eq!(grid.occluded(mesh, ray), want.is_hit(), "{ray:?}");
+    }
+
+    /// Directions too small to invert in f32 (on every axis, or on the only moving axis of a scene far
+    /// from the origin, where t overflows) used to spin forever; they must end and agree.
+    #[test]
+    fn tiny_directions_end_and_agree_with_brute_force() {
+        for (scale, offset) in [(1.0, [0.0; 3]), (1e-30, [0.0; 3])] {
+            let data = procedural::closed_sphere(6).transformed(scale, offset);
+            let mut budget = MemoryBudget::new(0);
+            let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+            let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+            let b = mesh.bounds();
+            let center = 0.5 * (b.min + b.max);
+            for d in [
+                Vec3::new(1e-45, 0.0, 0.0),
+                Vec3::new(-1e-45, 1e-45, 0.0),
+                Vec3::new(0.0, 1e-30, 0.0),
+                Vec3::new(0.0, -1e-30, 3e-39),
+                Vec3::new(2e-39, 2e-39, 2e-39),
+            ] {
+                for org in [center, b.min, center + 0.4 * (b.max - b.min)] {
+                    agree(&mesh, &grid, &Ray::new(org, d));
+                    agree(&mesh, &grid, &Ray::segment(org, d, 0.0, f32::MAX));
+                }
             }
         }
     }
-    // The triangle's plane (box axes were handled by the bounds).
-    !separates(e[0].cross(e[1]), &v, half)
-}
-
-fn separates(n: DVec3, v: &[DVec3; 3], half: DVec3) -> bool {
-    let p0 = n.dot(v[0]);
-    let p1 = n.dot(v[1]);
-    let p2 = n.dot(v[2]);
-    let r = half.dot(n.abs());
-    p0.min(p1).min(p2) > r || p0.max(p1).max(p2) < -r
 }

@@ -5,7 +5,7 @@ use core::ptr;
 use super::boundary;
 use super::types::*;
 use crate::budget::try_box;
-use crate::select::calibration::{Calibration, BUILTIN};
+use crate::select::calibration::{Calibration, BLOB_LEN, BUILTIN};
 
 static BUILTIN_STATIC: Calibration = BUILTIN;
 
@@ -47,10 +47,11 @@ pub unsafe extern "C" fn rq_calibration_from_bytes(
 }
 
 /// Writes the blob of `calib` into `buf` (capacity `cap`); `*written` receives its length. A buffer
-/// that is too small gives `RQ_STATUS_INVALID_ARGUMENT` and writes nothing.
+/// that is too small gives `RQ_STATUS_INVALID_ARGUMENT` and writes nothing. Size query: with
+/// `buf == NULL` and `cap == 0`, only `*written` receives the size the blob needs.
 ///
 /// # Safety
-/// `calib` is a live handle; `buf` writable for `cap` bytes; `written` writable.
+/// `calib` is a live handle; `buf` NULL or writable for `cap` bytes; `written` writable.
 #[no_mangle]
 pub unsafe extern "C" fn rq_calibration_to_bytes(
     calib: *const rq_calibration,
@@ -59,8 +60,16 @@ pub unsafe extern "C" fn rq_calibration_to_bytes(
     written: *mut usize,
 ) -> rq_status {
     boundary(|| {
-        if calib.is_null() || buf.is_null() || written.is_null() {
+        if calib.is_null() || written.is_null() {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
+        }
+        if buf.is_null() {
+            if cap != 0 {
+                return rq_status::RQ_STATUS_NULL_ARGUMENT;
+            }
+            // SAFETY: written is writable (contract).
+            unsafe { written.write_unaligned(BLOB_LEN) };
+            return rq_status::RQ_STATUS_OK;
         }
         // SAFETY: calib is a live handle pointing to a Calibration; buf is writable for cap bytes.
         let (c, out) = unsafe {

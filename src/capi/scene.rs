@@ -352,7 +352,8 @@ pub unsafe extern "C" fn rq_scene_occluded(scene: *const rq_scene, ray: *const r
     })
 }
 
-/// Closest hits of `n` rays into `hits[0..n]` (the two arrays must not overlap). `n == 0` is a no-op.
+/// Closest hits of `n` rays into `hits[0..n]` (the two arrays must not overlap). With a valid scene,
+/// `n == 0` is a no-op that accepts NULL arrays; a NULL scene is always `RQ_STATUS_NULL_ARGUMENT`.
 ///
 /// # Safety
 /// `rays` readable and `hits` writable for `n` elements when `n > 0`.
