@@ -2,6 +2,8 @@
 
 use glam::{DVec3, Vec3};
 
+use crate::math;
+
 /// A ray `org + t·dir` restricted to `tmin ≤ t ≤ tmax`. `dir` need not be normalized.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Ray {
@@ -136,13 +138,18 @@ fn near_miss(p: &[Vec3; 3], bary: [f64; 3], reach: f64) -> Option<[f64; 3]> {
     // The caller's rounding of a ray aimed in f32 grows with the coordinates and with the distance
     // from the origin.
     // Capped at 1/16 of the longest edge: far from the origin the coordinate term can exceed a small
-    // triangle, and the allowance must stay a rounding rescue, not a halo.
+    // triangle, and the allowance must stay a rounding rescue, not a halo. Shrunk for slivers by
+    // 2·sqrt(area)/longest edge (about 1 for a well-shaped triangle), so that the allowance is also
+    // small in barycentric terms, which is how a long thin triangle's error is usually judged.
     let longest = (q[1] - q[0])
         .length()
         .max((q[2] - q[1]).length())
         .max((q[0] - q[2]).length());
-    let tol = (f64::from(NEAR_MISS_TOLERANCE) * coord_scale
+    let area = 0.5 * (q[1] - q[0]).cross(q[2] - q[0]).length();
+    let sliver = (2.0 * math::sqrt64(area) / longest).min(1.0);
+    let tol = ((f64::from(NEAR_MISS_TOLERANCE) * coord_scale
         + f64::from(NEAR_MISS_TOLERANCE_PER_DISTANCE) * reach)
+        * sliver)
         .min(longest / 16.0);
     if (point - crossing).length() <= tol {
         Some(nearest)
