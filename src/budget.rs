@@ -93,6 +93,37 @@ impl MemoryBudget {
         Ok(v)
     }
 
+    /// Appends `value` to a vector that grows as the build goes (doubling, at least 64 elements),
+    /// charging each growth to the budget before asking the allocator.
+    pub fn push<T>(
+        &mut self,
+        v: &mut Vec<T>,
+        value: T,
+        what: &'static str,
+    ) -> Result<(), BuildError> {
+        if v.len() == v.capacity() {
+            let more = v.capacity().max(64);
+            let bytes =
+                more.checked_mul(core::mem::size_of::<T>())
+                    .ok_or(BuildError::OutOfMemory {
+                        what,
+                        bytes: usize::MAX,
+                    })?;
+            self.charge(bytes, what)?;
+            let before = v.capacity();
+            if v.try_reserve_exact(more).is_err() {
+                self.release(bytes);
+                return Err(BuildError::OutOfMemory { what, bytes });
+            }
+            // The allocator may round up; count what is really held so `free` balances.
+            let extra = (v.capacity() - before).saturating_sub(more) * core::mem::size_of::<T>();
+            self.used += extra;
+            self.peak = self.peak.max(self.used);
+        }
+        v.push(value);
+        Ok(())
+    }
+
     /// Releases a temporary vector charged with [`MemoryBudget::vec`] and drops it.
     pub fn free<T>(&mut self, v: Vec<T>) {
         self.release(v.capacity() * core::mem::size_of::<T>());

@@ -36,6 +36,7 @@ pub mod obj;
 
 pub use accel::brute::BruteForce;
 pub use accel::grid::{GridParams, UniformGrid};
+pub use accel::kdtree::{KdTree, KdTreeParams};
 pub use accel::{Aabb, RayQuery};
 pub use budget::MemoryBudget;
 pub use error::{BuildError, CalibError, MeshError};

@@ -5,7 +5,7 @@ mod common;
 use common::{assert_agrees, bundled, mesh_of, reference_hits, test_rays};
 use rayq::mesh::MeshData;
 use rayq::procedural;
-use rayq::{GridParams, MemoryBudget, UniformGrid};
+use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, UniformGrid};
 
 const GRIDS: [(&str, GridParams); 4] = [
     ("default", GridParams::DEFAULT),
@@ -16,6 +16,35 @@ const GRIDS: [(&str, GridParams); 4] = [
         GridParams {
             density: 2.0,
             exact_overlap: false,
+        },
+    ),
+];
+
+/// kd-tree parameter sets: the default, one that splits as deep as it may (tiny leaves, many
+/// straddlers), one that stops early (big leaves), and one with no empty-space bonus.
+const KDTREES: [(&str, KdTreeParams); 4] = [
+    ("kd-default", KdTreeParams::DEFAULT),
+    (
+        "kd-deep",
+        KdTreeParams {
+            intersection_cost: 80.0,
+            max_leaf_prims: 0,
+            ..KdTreeParams::DEFAULT
+        },
+    ),
+    (
+        "kd-shallow",
+        KdTreeParams {
+            intersection_cost: 0.5,
+            max_depth: 6,
+            ..KdTreeParams::DEFAULT
+        },
+    ),
+    (
+        "kd-no-bonus",
+        KdTreeParams {
+            empty_bonus: 0.0,
+            ..KdTreeParams::DEFAULT
         },
     ),
 ];
@@ -39,6 +68,11 @@ fn check(name: &str, data: &MeshData, side: usize, adversarial: usize) {
                 "{name}: no ray hit anything, the test would prove nothing"
             );
         }
+    }
+    for (label, params) in KDTREES {
+        let tree =
+            KdTree::build(&mesh, &params, &mut MemoryBudget::new(0)).expect("kd-tree builds");
+        assert_agrees(&format!("{name}/{label}"), &mesh, &tree, &rays, &want);
     }
 }
 
@@ -108,19 +142,18 @@ fn duplicate_and_coplanar_triangles_tie_to_the_lowest_id() {
     let mesh = mesh_of(&data);
     let rays = test_rays(&mesh, 16, 400, 3);
     let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
-    assert_agrees(
-        "duplicates",
-        &mesh,
-        &grid,
-        &rays,
-        &reference_hits(&mesh, &rays),
-    );
-    for r in &rays {
-        let h = rayq::accel::RayQuery::intersect(&grid, &mesh, r);
-        assert!(
-            !h.is_hit() || h.prim < 200,
-            "a duplicate with the higher id won a tie: {h:?}"
-        );
+    let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let want = reference_hits(&mesh, &rays);
+    let structures: [(&str, &dyn rayq::RayQuery); 2] = [("grid", &grid), ("kd-tree", &tree)];
+    for (label, accel) in structures {
+        assert_agrees(label, &mesh, accel, &rays, &want);
+        for r in &rays {
+            let h = accel.intersect(&mesh, r);
+            assert!(
+                !h.is_hit() || h.prim < 200,
+                "{label}: a duplicate with the higher id won a tie: {h:?}"
+            );
+        }
     }
 }
 

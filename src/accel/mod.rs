@@ -7,6 +7,7 @@ use crate::ray::{Hit, Ray};
 
 pub mod brute;
 pub mod grid;
+pub mod kdtree;
 
 /// An axis-aligned box. [`Aabb::EMPTY`] has `min > max` and contains nothing.
 #[derive(Clone, Copy, Debug, PartialEq)]

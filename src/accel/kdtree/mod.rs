@@ -1,0 +1,247 @@
+//! The SAH kd-tree: an O(N log N) event-sweep build with perfect splits (build.rs), 8-byte nodes
+//! (node.rs) and a stack-based front-to-back traversal (traverse.rs).
+
+use alloc::vec::Vec;
+
+use crate::accel::{Aabb, RayQuery};
+use crate::budget::{bytes_of, MemoryBudget};
+use crate::error::BuildError;
+use crate::mesh::TriMesh;
+use crate::ray::{Hit, PreparedRay, Ray};
+
+mod build;
+pub mod node;
+mod traverse;
+
+use node::KdNode;
+use traverse::Walk;
+
+/// The deepest tree the builder makes; the traversal stack has room for it.
+pub const MAX_DEPTH: u32 = 60;
+
+/// The kd-tree's knobs. The costs are in units of one traversal step; the calibration supplies
+/// measured ones later.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KdTreeParams {
+    /// Cost of visiting an interior node (the SAH's `C_t`). Finite, positive.
+    pub traversal_cost: f32,
+    /// Cost of one triangle test (the SAH's `C_i`). Finite, positive.
+    pub intersection_cost: f32,
+    /// Fraction of a split's cost forgiven when one child is empty (in `[0, 1)`): cutting off empty
+    /// space pays beyond what the SAH counts, because rays leave such nodes early.
+    pub empty_bonus: f32,
+    /// Depth limit; 0 = automatic, `8 + 1.3·log2 N` (a safety net: the SAH stops first almost
+    /// always). At most [`MAX_DEPTH`].
+    pub max_depth: u32,
+    /// Nodes with at most this many triangles become leaves without a split search.
+    pub max_leaf_prims: u32,
+    /// Bound on leaf references per triangle from clipped straddlers: once the tree would hold more,
+    /// nodes stop splitting. At least 1.
+    pub max_references_per_triangle: f32,
+}
+
+impl KdTreeParams {
+    /// Defaults measured on the bundled scenes (docs/performance.md): a triangle test costs about
+    /// four traversal steps with rayq's f64 test; empty-space bonus 0.8 as Wald & Havran.
+    pub const DEFAULT: KdTreeParams = KdTreeParams {
+        traversal_cost: 1.0,
+        intersection_cost: 4.0,
+        empty_bonus: 0.8,
+        max_depth: 0,
+        max_leaf_prims: 1,
+        max_references_per_triangle: 16.0,
+    };
+
+    fn validate(&self) -> Result<(), BuildError> {
+        let positive = |x: f32| x.is_finite() && x > 0.0;
+        if !(positive(self.traversal_cost) && positive(self.intersection_cost)) {
+            return Err(BuildError::InvalidArgument {
+                what: "kd-tree costs must be finite and positive",
+            });
+        }
+        if !(self.empty_bonus >= 0.0 && self.empty_bonus < 1.0) {
+            return Err(BuildError::InvalidArgument {
+                what: "kd-tree empty bonus must be in [0, 1)",
+            });
+        }
+        if !(self.max_references_per_triangle >= 1.0
+            && self.max_references_per_triangle.is_finite())
+        {
+            return Err(BuildError::InvalidArgument {
+                what: "kd-tree reference bound must be finite and at least 1",
+            });
+        }
+        Ok(())
+    }
+}
+
+impl Default for KdTreeParams {
+    fn default() -> Self {
+        KdTreeParams::DEFAULT
+    }
+}
+
+/// What one query did, for the selector's deterministic cost model.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct KdWork {
+    /// Nodes visited (interior and leaves).
+    pub nodes: u32,
+    /// Leaves visited.
+    pub leaves: u32,
+    /// Triangle tests run.
+    pub tests: u32,
+}
+
+/// A SAH kd-tree over a [`TriMesh`].
+///
+/// # Guarantees
+/// - every non-degenerate triangle is referenced by every leaf whose closed box meets it (clipping
+///   is rounded outward), so the traversal, which widens each ray's split intervals by the triangle
+///   test's near-miss allowance plus its own rounding, never skips a triangle the shared test would
+///   hit: answers are bit-identical to brute force;
+/// - depth ≤ [`MAX_DEPTH`], so the fixed traversal stack never overflows;
+/// - nodes and references fit their 30- and 32-bit fields (`CapacityExceeded` otherwise).
+#[derive(Debug)]
+pub struct KdTree {
+    bounds: Aabb,
+    nodes: Vec<KdNode>,
+    prims: Vec<u32>,
+    depth: u32,
+    leaves: u32,
+    /// The scene's largest coordinate magnitude, for the per-ray tolerance.
+    coord_bound: f32,
+    /// An upper bound of the near-miss allowance of any triangle (1/16 of its longest edge), so
+    /// the per-ray tolerance stays small for scenes far from the origin.
+    near_miss_cap: f32,
+    references: usize,
+}
+
+impl KdTree {
+    /// Builds the tree over `mesh`, charging its arrays (and the build's temporaries) to `budget`.
+    /// Time O(N log N), memory O(N) plus the references of clipped straddlers.
+    pub fn build(
+        mesh: &TriMesh,
+        params: &KdTreeParams,
+        budget: &mut MemoryBudget,
+    ) -> Result<KdTree, BuildError> {
+        params.validate()?;
+        let bounds = mesh.bounds();
+        let live = mesh.len() - mesh.degenerate_count();
+        let mut longest = 0.0f64;
+        for (i, t) in mesh.triangles().iter().enumerate() {
+            if !mesh.is_degenerate(i as u32) {
+                let q = [t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3()];
+                let e = (q[1] - q[0])
+                    .length_squared()
+                    .max((q[2] - q[1]).length_squared())
+                    .max((q[0] - q[2]).length_squared());
+                longest = longest.max(e);
+            }
+        }
+        let longest = crate::math::sqrt64(longest);
+        let root = if live == 0 { Aabb::EMPTY } else { bounds };
+        let built = if live == 0 {
+            let mut nodes = budget.vec(1, "kd-tree nodes")?;
+            nodes.push(KdNode::leaf(0, 0));
+            build::Built {
+                nodes,
+                prims: Vec::new(),
+                depth: 0,
+                leaves: 1,
+            }
+        } else {
+            build::build(mesh, params, root, budget)?
+        };
+        let singles = built
+            .nodes
+            .iter()
+            .filter(|n| n.is_leaf() && n.count() == 1)
+            .count();
+        Ok(KdTree {
+            bounds: root,
+            references: built.prims.len() + singles,
+            nodes: built.nodes,
+            prims: built.prims,
+            depth: built.depth,
+            leaves: built.leaves,
+            coord_bound: mesh.coordinate_bound(),
+            // Twice 1/16 of the longest edge, rounded up generously.
+            near_miss_cap: (longest / 8.0 * (1.0 + 1e-6)) as f32,
+        })
+    }
+
+    /// Nodes in the tree (interior and leaves).
+    pub fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    /// Leaves in the tree.
+    pub fn leaf_count(&self) -> usize {
+        self.leaves as usize
+    }
+
+    /// Depth of the deepest leaf (the root is at depth 0).
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// Triangle references held by the leaves (a straddling triangle counts once per leaf).
+    pub fn reference_count(&self) -> usize {
+        self.references
+    }
+
+    /// Bytes the tree holds.
+    pub fn memory_bytes(&self) -> usize {
+        bytes_of(&self.nodes) + bytes_of(&self.prims)
+    }
+
+    /// Gives the tree's bytes back to the budget it was charged to and drops it.
+    pub fn release(self, budget: &mut MemoryBudget) {
+        budget.free(self.nodes);
+        budget.free(self.prims);
+    }
+
+    /// The closest hit, also counting the work done.
+    pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
+        let Some(r) = PreparedRay::new(ray) else {
+            return Hit::MISS;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<true, false> {
+            tree: self,
+            mesh,
+            work,
+        })
+    }
+}
+
+impl RayQuery for KdTree {
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
+        let Some(r) = PreparedRay::new(ray) else {
+            return Hit::MISS;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<false, false> {
+            tree: self,
+            mesh,
+            work: &mut KdWork::default(),
+        })
+    }
+
+    fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
+        let Some(r) = PreparedRay::new(ray) else {
+            return false;
+        };
+        let r = r.far_bound(mesh.coordinate_bound());
+        r.dispatch(Walk::<false, true> {
+            tree: self,
+            mesh,
+            work: &mut KdWork::default(),
+        })
+        .is_hit()
+    }
+}

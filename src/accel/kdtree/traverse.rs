@@ -1,0 +1,204 @@
+//! Front-to-back traversal with a fixed on-stack stack (Havran's TA_B_rec family), widened so that
+//! rounding and the triangle test's near-miss allowance can never hide a hit.
+//!
+//! Why the widening is enough: a hit at `t` (the ray's point `P`) comes from a triangle with a point
+//! `Q` within the near-miss allowance `tol` of `P`, and the triangle is referenced by a leaf whose
+//! closed box holds `Q`. Each node's interval is widened by `tol` in space (`tol·|1/d_a|` in `t`) plus
+//! the rounding of its own `t` (8 ulps of `t`), so every node whose box lies within `tol` of `P` has
+//! `t` in its interval. A subtree is skipped only when the best hit so far is strictly before its
+//! widened entry, so a nearer hit, or an equally near one with a lower id, is never skipped.
+
+use glam::Vec3;
+
+use super::{KdTree, KdWork, MAX_DEPTH};
+use crate::mesh::TriMesh;
+use crate::ray::{
+    Hit, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE, NEAR_MISS_TOLERANCE_PER_DISTANCE,
+};
+
+/// Room for one pending far child per level of the deepest tree.
+const STACK_SIZE: usize = MAX_DEPTH as usize + 4;
+
+/// Relative rounding slack of a computed `t` (8 ulps).
+const T_SLACK: f32 = 8.0 * f32::EPSILON;
+
+#[derive(Clone, Copy)]
+struct Pending {
+    node: u32,
+    t0: f32,
+    t1: f32,
+}
+
+/// One query's walk. `COUNT` counts the work; `ANY` stops at the first hit.
+pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
+    pub tree: &'a KdTree,
+    pub mesh: &'a TriMesh,
+    pub work: &'a mut KdWork,
+}
+
+/// The per-ray spatial tolerance: twice the largest near-miss allowance any triangle can grant this
+/// ray (see `ray::near_miss`), rounded up.
+#[inline]
+fn tolerance(tree: &KdTree, org: Vec3) -> f32 {
+    let b = f64::from(tree.coord_bound);
+    let reach = b + f64::from(org.abs().max_element());
+    let nm = 2.0
+        * (f64::from(NEAR_MISS_TOLERANCE) * b
+            + f64::from(NEAR_MISS_TOLERANCE_PER_DISTANCE) * reach);
+    (nm.min(f64::from(tree.near_miss_cap)) * (1.0 + 1e-6)) as f32
+}
+
+impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
+    type Output = Hit;
+
+    #[inline(always)]
+    fn run<T: TriangleTest>(self, test: T) -> Hit {
+        let Walk { tree, mesh, work } = self;
+        let r = test.ray();
+        let mut best = Hit::MISS;
+        if tree.bounds.is_empty() {
+            return best;
+        }
+        let (o, d) = (r.org, r.dir);
+        let tol = tolerance(tree, o);
+        let mut inv = [0.0f32; 3];
+        let mut widen = [0.0f32; 3];
+        let (mut t0, mut t1) = (r.tmin, r.tmax);
+        let (lo, hi) = (tree.bounds.min, tree.bounds.max);
+        for a in 0..3 {
+            if d[a] == 0.0 {
+                if o[a] < lo[a] - tol || o[a] > hi[a] + tol {
+                    return best;
+                }
+                continue;
+            }
+            // `1/d` may be infinite for a denormal component; the intervals then become NaN or
+            // infinite and the min/max below leave them unconstrained: slower, never wrong.
+            inv[a] = 1.0 / d[a];
+            widen[a] = tol * inv[a].abs();
+            let ta = (lo[a] - o[a]) * inv[a];
+            let tb = (hi[a] - o[a]) * inv[a];
+            let (near, far) = (ta.min(tb), ta.max(tb));
+            t0 = t0.max(near - widen[a] - T_SLACK * near.abs());
+            t1 = t1.min(far + widen[a] + T_SLACK * far.abs());
+        }
+        if !(t0 <= t1) {
+            return best;
+        }
+        let nodes = &tree.nodes[..];
+        let mut stack = [Pending {
+            node: 0,
+            t0: 0.0,
+            t1: 0.0,
+        }; STACK_SIZE];
+        let mut sp = 0usize;
+        let mut index = 0u32;
+        loop {
+            let Some(&node) = nodes.get(index as usize) else {
+                return best;
+            };
+            if COUNT {
+                work.nodes += 1;
+            }
+            if !node.is_leaf() {
+                let a = node.axis() & 3;
+                let a = if a == 3 { 2 } else { a };
+                let s = node.split();
+                let below = index + 1;
+                let above = node.above();
+                let (near, far, near_t1, far_t0);
+                if d[a] == 0.0 {
+                    // The ray never crosses the plane: the side holding the origin, and the other
+                    // one too when the origin is within the tolerance of the plane.
+                    let on_below = o[a] < s;
+                    (near, far) = if on_below {
+                        (below, above)
+                    } else {
+                        (above, below)
+                    };
+                    near_t1 = t1;
+                    far_t0 = if (o[a] - s).abs() <= tol {
+                        t0
+                    } else {
+                        f32::INFINITY
+                    };
+                } else {
+                    let ts = (s - o[a]) * inv[a];
+                    let w = widen[a] + T_SLACK * ts.abs();
+                    (near, far) = if d[a] > 0.0 {
+                        (below, above)
+                    } else {
+                        (above, below)
+                    };
+                    // `min`/`max` ignore a NaN operand, which leaves the interval whole.
+                    near_t1 = t1.min(ts + w);
+                    far_t0 = t0.max(ts - w);
+                }
+                let go_near = near_t1 >= t0;
+                let go_far = far_t0 <= t1;
+                if go_near {
+                    if go_far {
+                        // The depth bound (≤ MAX_DEPTH < STACK_SIZE) leaves room: one entry per level.
+                        if let Some(slot) = stack.get_mut(sp) {
+                            *slot = Pending {
+                                node: far,
+                                t0: far_t0,
+                                t1,
+                            };
+                            sp += 1;
+                        }
+                    }
+                    index = near;
+                    t1 = near_t1;
+                    continue;
+                }
+                if go_far {
+                    index = far;
+                    t0 = far_t0;
+                    continue;
+                }
+            } else {
+                let count = node.count();
+                let one = [node.prim_or_offset()];
+                let prims: &[u32] = if count == 1 {
+                    &one
+                } else {
+                    let off = node.prim_or_offset() as usize;
+                    tree.prims.get(off..off + count as usize).unwrap_or(&[])
+                };
+                if COUNT {
+                    work.leaves += 1;
+                    work.tests += prims.len() as u32;
+                }
+                for &prim in prims {
+                    let Some(tri) = mesh.triangle(prim) else {
+                        continue;
+                    };
+                    if let Some((t, u, v)) = test.test(tri) {
+                        let h = Hit { t, u, v, prim };
+                        if ANY {
+                            return h;
+                        }
+                        if h.beats(&best) {
+                            best = h;
+                        }
+                    }
+                }
+            }
+            // Next pending subtree that may still hold a hit at or before the best one.
+            loop {
+                if sp == 0 {
+                    return best;
+                }
+                sp -= 1;
+                let p = stack[sp];
+                if !(best.t < p.t0) {
+                    index = p.node;
+                    t0 = p.t0;
+                    t1 = p.t1;
+                    break;
+                }
+            }
+        }
+    }
+}
