@@ -345,7 +345,7 @@ static void test_empty(void) {
     o.memory_limit = 4096;
     rq_scene *scene = NULL;
     rq_status st = rq_scene_build(&d, &o, NULL, &scene);
-    CHECKF(st == RQ_STATUS_OK || (s == RQ_STRUCTURE_KDTREE && st == RQ_STATUS_UNSUPPORTED),
+    CHECKF(st == RQ_STATUS_OK,
            "empty mesh, structure %d: %u (%s)", s, (unsigned)st, rq_status_str(st));
     if (scene) {
       check_all_miss(scene, "empty mesh with options");

@@ -155,7 +155,10 @@ static void test_layouts(void) {
   CHECK(offsetof(rq_scene_report, grid_resolution) == 32);
   CHECK(offsetof(rq_scene_report, grid_ray_seconds) == 48);
   CHECK(offsetof(rq_scene_report, expected_rays) == 80);
-  CHECK(sizeof(rq_scene_report) == 96);
+  CHECK(offsetof(rq_scene_report, references_per_triangle) == 88);
+  CHECK(offsetof(rq_scene_report, kd_node_count) == 96);
+  CHECK(offsetof(rq_scene_report, kd_depth) == 104);
+  CHECK(sizeof(rq_scene_report) == 112);
 #endif
 }
 
@@ -567,7 +570,8 @@ static const struct {
     REPORT_FIELD(structure),        REPORT_FIELD(outcome),          REPORT_FIELD(triangle_count),
     REPORT_FIELD(memory_bytes),     REPORT_FIELD(grid_resolution),  REPORT_FIELD(grid_ray_seconds),
     REPORT_FIELD(kd_ray_seconds),   REPORT_FIELD(kd_build_seconds), REPORT_FIELD(break_even_rays),
-    REPORT_FIELD(expected_rays),    REPORT_FIELD(references_per_triangle),
+    REPORT_FIELD(expected_rays),    REPORT_FIELD(references_per_triangle), REPORT_FIELD(kd_node_count),
+    REPORT_FIELD(kd_depth),
 };
 
 static void test_report_struct_size(void) {

@@ -679,7 +679,7 @@ static void test_batch_and_structures(int structure) {
       }
     }
 
-    /* Against the grid (and the kd-tree, when this build has one): bit for bit. */
+    /* Against the grid and the kd-tree: bit for bit. */
     for (int s = RQ_STRUCTURE_GRID; s <= RQ_STRUCTURE_KDTREE; s++) {
       rq_mesh_desc d = mesh_desc(&meshes[mi]);
       rq_build_options o;
@@ -687,10 +687,6 @@ static void test_batch_and_structures(int structure) {
       o.structure = (rq_structure)s;
       rq_scene *alt = NULL;
       rq_status st = rq_scene_build(&d, &o, NULL, &alt);
-      if (s == RQ_STRUCTURE_KDTREE && st == RQ_STATUS_UNSUPPORTED) {
-        CHECK(alt == NULL);
-        continue;
-      }
       CHECKF(st == RQ_STATUS_OK, "mesh %d structure %s: %u (%s)", mi, structure_name(s), (unsigned)st,
              rq_status_str(st));
       if (!alt) {
@@ -741,7 +737,7 @@ int main(void) {
     o.structure = RQ_STRUCTURE_KDTREE;
     rq_scene *scene = (rq_scene *)test_sentinel();
     rq_status st = rq_scene_build(&d, &o, NULL, &scene);
-    CHECKF(st == RQ_STATUS_OK || st == RQ_STATUS_UNSUPPORTED, "kdtree: %u (%s)", (unsigned)st, rq_status_str(st));
+    CHECKF(st == RQ_STATUS_OK, "kdtree: %u (%s)", (unsigned)st, rq_status_str(st));
     if (st == RQ_STATUS_OK) {
       rq_scene_free(scene);
       long before = test_failures;

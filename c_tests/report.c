@@ -157,12 +157,17 @@ static void test_kdtree_report(void) {
   o.structure = RQ_STRUCTURE_KDTREE;
   rq_scene *scene = NULL;
   rq_status s = rq_scene_build(&d, &o, NULL, &scene);
-  CHECKF(s == RQ_STATUS_OK || s == RQ_STATUS_UNSUPPORTED, "kdtree: %u (%s)", (unsigned)s, rq_status_str(s));
+  CHECKF(s == RQ_STATUS_OK, "kdtree: %u (%s)", (unsigned)s, rq_status_str(s));
   if (scene) {
     rq_scene_report r = get_report(scene);
     check_common(&r, m.nt, "kdtree");
     CHECK(r.structure == RQ_STRUCTURE_KDTREE && r.outcome == RQ_OUTCOME_FORCED);
     CHECK(r.memory_bytes > 0);
+    /* The tree's shape: at least a root, no grid, every triangle referenced at least once. */
+    CHECKF(r.kd_node_count >= 1 && r.kd_node_count % 2 == 1, "kd_node_count %zu", r.kd_node_count);
+    CHECKF(r.kd_depth <= 60, "kd_depth %u", (unsigned)r.kd_depth);
+    CHECK(r.grid_resolution[0] == 0 && r.grid_resolution[1] == 0 && r.grid_resolution[2] == 0);
+    CHECKF(r.references_per_triangle >= 1.0, "references_per_triangle %g", r.references_per_triangle);
     rq_scene_free(scene);
   }
   mesh_free(&m);

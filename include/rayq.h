@@ -213,6 +213,10 @@ typedef struct rq_scene_report {
   uint64_t expected_rays;
   // Triangle references per non-degenerate triangle in the structure in use.
   double references_per_triangle;
+  // kd-tree nodes, interior and leaves (0 when no kd-tree is held).
+  size_t kd_node_count;
+  // Depth of the kd-tree's deepest leaf (0 when no kd-tree is held).
+  uint32_t kd_depth;
 } rq_scene_report;
 
 #ifdef __cplusplus

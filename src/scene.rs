@@ -1,6 +1,7 @@
 //! A built scene: the validated mesh, the structure in use, and the report of how it was chosen.
 
 use crate::accel::grid::{GridParams, UniformGrid};
+use crate::accel::kdtree::{KdTree, KdTreeParams};
 use crate::accel::RayQuery;
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
@@ -47,6 +48,8 @@ pub struct BuildOptions {
     pub memory_limit: usize,
     /// Grid parameters; default [`GridParams::DEFAULT`].
     pub grid: GridParams,
+    /// kd-tree parameters; default [`KdTreeParams::DEFAULT`].
+    pub kdtree: KdTreeParams,
 }
 
 impl BuildOptions {
@@ -56,6 +59,7 @@ impl BuildOptions {
         expected_rays: 0,
         memory_limit: 0,
         grid: GridParams::DEFAULT,
+        kdtree: KdTreeParams::DEFAULT,
     };
 }
 
@@ -70,13 +74,53 @@ impl Default for BuildOptions {
 pub enum Accel {
     /// A uniform grid.
     Grid(UniformGrid),
+    /// A SAH kd-tree.
+    KdTree(KdTree),
 }
 
 impl Accel {
     fn query(&self) -> &dyn RayQuery {
         match self {
             Accel::Grid(g) => g,
+            Accel::KdTree(k) => k,
         }
+    }
+
+    /// Which structure this is.
+    pub fn structure(&self) -> Structure {
+        match self {
+            Accel::Grid(_) => Structure::Grid,
+            Accel::KdTree(_) => Structure::KdTree,
+        }
+    }
+
+    /// Bytes the structure holds.
+    pub fn memory_bytes(&self) -> usize {
+        match self {
+            Accel::Grid(g) => g.memory_bytes(),
+            Accel::KdTree(k) => k.memory_bytes(),
+        }
+    }
+
+    /// Triangle references the structure holds.
+    pub fn reference_count(&self) -> usize {
+        match self {
+            Accel::Grid(g) => g.reference_count(),
+            Accel::KdTree(k) => k.reference_count(),
+        }
+    }
+
+    /// Builds `structure` (`Grid` or `KdTree`) over `mesh`.
+    fn build(
+        structure: Structure,
+        mesh: &TriMesh,
+        options: &BuildOptions,
+        budget: &mut MemoryBudget,
+    ) -> Result<Accel, BuildError> {
+        Ok(match structure {
+            Structure::KdTree => Accel::KdTree(KdTree::build(mesh, &options.kdtree, budget)?),
+            _ => Accel::Grid(UniformGrid::build(mesh, &options.grid, budget)?),
+        })
     }
 }
 
@@ -105,6 +149,10 @@ pub struct SceneReport {
     pub expected_rays: u64,
     /// References per non-degenerate triangle held by the structure.
     pub references_per_triangle: f64,
+    /// kd-tree nodes, interior and leaves (zero when no kd-tree is held).
+    pub kd_node_count: usize,
+    /// Depth of the kd-tree's deepest leaf (zero when no kd-tree is held).
+    pub kd_depth: u32,
 }
 
 /// An immutable scene: safe to query from many threads at once.
@@ -120,40 +168,42 @@ pub struct Scene {
 }
 
 impl Scene {
-    /// Validates the mesh and builds the requested structure. `KdTree` is not available yet and
-    /// returns [`BuildError::Unsupported`]; until it is, `Auto` is served by the grid (outcome
-    /// `OnlineOnGrid` for an unknown budget, `Forced` otherwise, estimates NaN).
+    /// Validates the mesh and builds the requested structure. Until the selector lands, `Auto` is
+    /// served by the grid (outcome `OnlineOnGrid` for an unknown budget, `Forced` otherwise,
+    /// estimates NaN).
     pub fn build(
         src: &impl MeshSource,
         options: &BuildOptions,
         _calibration: &Calibration,
     ) -> Result<Scene, BuildError> {
-        let outcome = match options.structure {
-            Structure::Grid => Outcome::Forced,
-            Structure::KdTree => {
-                return Err(BuildError::Unsupported {
-                    what: "the kd-tree",
-                })
+        let (structure, outcome) = match options.structure {
+            Structure::Grid => (Structure::Grid, Outcome::Forced),
+            Structure::KdTree => (Structure::KdTree, Outcome::Forced),
+            Structure::Auto if options.expected_rays == 0 => {
+                (Structure::Grid, Outcome::OnlineOnGrid)
             }
-            Structure::Auto if options.expected_rays == 0 => Outcome::OnlineOnGrid,
-            Structure::Auto => Outcome::Forced,
+            Structure::Auto => (Structure::Grid, Outcome::Forced),
         };
         let mut budget = MemoryBudget::new(options.memory_limit);
         let mesh = TriMesh::from_source(src, &mut budget)?;
-        let grid = match UniformGrid::build(&mesh, &options.grid, &mut budget) {
-            Ok(g) => g,
+        let accel = match Accel::build(structure, &mesh, options, &mut budget) {
+            Ok(a) => a,
             Err(e) => {
                 mesh.release(&mut budget);
                 return Err(e);
             }
         };
         let live = mesh.len() - mesh.degenerate_count();
+        let (grid_resolution, kd_node_count, kd_depth) = match &accel {
+            Accel::Grid(g) => (g.resolution(), 0, 0),
+            Accel::KdTree(k) => ([0; 3], k.node_count(), k.depth()),
+        };
         let report = SceneReport {
-            structure: Structure::Grid,
+            structure: accel.structure(),
             outcome,
             triangle_count: mesh.len(),
-            memory_bytes: mesh.memory_bytes() + grid.memory_bytes(),
-            grid_resolution: grid.resolution(),
+            memory_bytes: mesh.memory_bytes() + accel.memory_bytes(),
+            grid_resolution,
             grid_ray_seconds: f64::NAN,
             kd_ray_seconds: f64::NAN,
             kd_build_seconds: f64::NAN,
@@ -162,12 +212,14 @@ impl Scene {
             references_per_triangle: if live == 0 {
                 0.0
             } else {
-                grid.reference_count() as f64 / live as f64
+                accel.reference_count() as f64 / live as f64
             },
+            kd_node_count,
+            kd_depth,
         };
         Ok(Scene {
             mesh,
-            accel: Accel::Grid(grid),
+            accel,
             report,
             rays_traced: 0,
         })

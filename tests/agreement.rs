@@ -185,3 +185,27 @@ fn all_triangles_in_one_cell() {
     });
     check("one cell", &data, 16, 800);
 }
+
+#[test]
+fn counted_queries_return_the_same_hits_and_count_the_work() {
+    let data = bundled("teapot");
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 16, 200, 9);
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let (mut kd_total, mut grid_total) = (0u64, 0u64);
+    for r in &rays {
+        let mut kw = rayq::accel::kdtree::KdWork::default();
+        let h = tree.intersect_counted(&mesh, r, &mut kw);
+        assert!(h.same_bits(&rayq::RayQuery::intersect(&tree, &mesh, r)));
+        assert!(kw.leaves <= kw.nodes, "{kw:?}");
+        assert!(!h.is_hit() || kw.tests >= 1, "a hit without a test: {kw:?}");
+        let mut gw = rayq::accel::grid::GridWork::default();
+        let g = grid.intersect_counted(&mesh, r, &mut gw);
+        assert!(g.same_bits(&h));
+        assert!(!g.is_hit() || (gw.tests >= 1 && gw.cells >= 1), "{gw:?}");
+        kd_total += u64::from(kw.tests);
+        grid_total += u64::from(gw.tests);
+    }
+    assert!(kd_total > 0 && grid_total > 0);
+}

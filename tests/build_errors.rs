@@ -49,43 +49,40 @@ fn out_of_range_indices_are_refused_with_the_triangle() {
     );
 }
 
-#[test]
-fn memory_limit_stops_the_build_before_it_takes_memory() {
+/// Limits below what `structure` needs stop the build with `MemoryLimit`; the smallest limit that
+/// lets it through holds the finished scene.
+fn memory_limit_is_enforced(structure: Structure) {
     let data = rayq::procedural::by_name("soup", 20_000).unwrap();
-    let unlimited = build(&data, &GRID).unwrap();
-    let needed = unlimited.report().memory_bytes;
+    let with = |memory_limit| BuildOptions {
+        structure,
+        memory_limit,
+        ..BuildOptions::DEFAULT
+    };
+    let needed = build(&data, &with(0)).unwrap().report().memory_bytes;
     for limit in [1, 64, 4096, needed / 2, needed - 1] {
-        let options = BuildOptions {
-            memory_limit: limit,
-            ..GRID
-        };
         assert!(
-            matches!(build(&data, &options), Err(BuildError::MemoryLimit { limit: l, .. }) if l == limit),
-            "limit {limit} of {needed} needed was not enforced"
+            matches!(build(&data, &with(limit)), Err(BuildError::MemoryLimit { limit: l, .. }) if l == limit),
+            "{structure:?}: limit {limit} of {needed} needed was not enforced"
         );
     }
     // The peak during the build can exceed what the scene keeps, so find the smallest limit that
     // passes and check the scene then fits it.
-    let fits = (0..64).map(|k| needed + k * needed / 16).find(|&l| {
-        build(
-            &data,
-            &BuildOptions {
-                memory_limit: l,
-                ..GRID
-            },
-        )
-        .is_ok()
-    });
+    let fits = (0..64)
+        .map(|k| needed + k * needed / 16)
+        .find(|&l| build(&data, &with(l)).is_ok());
     let limit = fits.expect("a limit a few times the scene size lets the build through");
-    let scene = build(
-        &data,
-        &BuildOptions {
-            memory_limit: limit,
-            ..GRID
-        },
-    )
-    .unwrap();
+    let scene = build(&data, &with(limit)).unwrap();
     assert!(scene.report().memory_bytes <= limit);
+}
+
+#[test]
+fn memory_limit_stops_the_grid_build_before_it_takes_memory() {
+    memory_limit_is_enforced(Structure::Grid);
+}
+
+#[test]
+fn memory_limit_stops_the_kd_tree_build_before_it_takes_memory() {
+    memory_limit_is_enforced(Structure::KdTree);
 }
 
 #[test]
@@ -99,6 +96,79 @@ fn budget_accounts_every_byte_and_gives_them_back() {
     grid.release(&mut budget);
     mesh.release(&mut budget);
     assert_eq!(budget.used(), 0);
+    // The kd-tree's build temporaries (events, scratch) are all given back; what stays is the tree.
+    let mut budget = MemoryBudget::new(0);
+    let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+    let tree = rayq::KdTree::build(&mesh, &rayq::KdTreeParams::DEFAULT, &mut budget).unwrap();
+    assert_eq!(budget.used(), mesh.memory_bytes() + tree.memory_bytes());
+    // The root's events (two per triangle and axis, 8 bytes each) were charged too.
+    assert!(budget.peak() >= mesh.memory_bytes() + 6 * 8 * mesh.len());
+    tree.release(&mut budget);
+    mesh.release(&mut budget);
+    assert_eq!(budget.used(), 0);
+}
+
+#[test]
+fn kd_tree_bounds_straddler_references() {
+    // Large overlapping triangles straddle most split planes of a deep tree.
+    let data = rayq::procedural::random_soup(3_000, 5, 0.5);
+    let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+    let live = (mesh.len() - mesh.degenerate_count()) as f64;
+    for bound in [1.0f32, 2.0, 4.0] {
+        let params = rayq::KdTreeParams {
+            max_references_per_triangle: bound,
+            intersection_cost: 80.0,
+            ..rayq::KdTreeParams::DEFAULT
+        };
+        let tree = rayq::KdTree::build(&mesh, &params, &mut MemoryBudget::new(0)).unwrap();
+        let per = tree.reference_count() as f64 / live;
+        assert!(
+            per <= f64::from(bound),
+            "bound {bound}: {per} references per triangle"
+        );
+    }
+    let unbounded = rayq::KdTreeParams {
+        max_references_per_triangle: 1e6,
+        intersection_cost: 80.0,
+        ..rayq::KdTreeParams::DEFAULT
+    };
+    let tree = rayq::KdTree::build(&mesh, &unbounded, &mut MemoryBudget::new(0)).unwrap();
+    assert!(
+        tree.reference_count() as f64 / live > 4.0,
+        "slivers should straddle enough to make the bound matter"
+    );
+}
+
+#[test]
+fn kd_tree_parameters_are_validated() {
+    let mesh = TriMesh::from_source(&tri().as_source(), &mut MemoryBudget::new(0)).unwrap();
+    let bad = [
+        rayq::KdTreeParams {
+            intersection_cost: f32::NAN,
+            ..rayq::KdTreeParams::DEFAULT
+        },
+        rayq::KdTreeParams {
+            traversal_cost: 0.0,
+            ..rayq::KdTreeParams::DEFAULT
+        },
+        rayq::KdTreeParams {
+            empty_bonus: 1.0,
+            ..rayq::KdTreeParams::DEFAULT
+        },
+        rayq::KdTreeParams {
+            max_references_per_triangle: 0.5,
+            ..rayq::KdTreeParams::DEFAULT
+        },
+    ];
+    for p in bad {
+        assert!(
+            matches!(
+                rayq::KdTree::build(&mesh, &p, &mut MemoryBudget::new(0)),
+                Err(BuildError::InvalidArgument { .. })
+            ),
+            "{p:?} was accepted"
+        );
+    }
 }
 
 #[test]
@@ -138,13 +208,15 @@ fn degenerate_triangles_are_kept_counted_and_never_hit() {
 }
 
 #[test]
-fn kd_tree_is_reported_unsupported_until_it_exists() {
+fn kd_tree_builds_and_reports_its_shape() {
     let options = BuildOptions {
         structure: Structure::KdTree,
         ..BuildOptions::DEFAULT
     };
-    assert!(matches!(
-        build(&tri(), &options),
-        Err(BuildError::Unsupported { .. })
-    ));
+    let scene = build(&tri(), &options).expect("kd-tree builds");
+    let r = scene.report();
+    assert_eq!(r.structure, Structure::KdTree);
+    assert_eq!(r.grid_resolution, [0; 3]);
+    assert!(r.kd_node_count >= 1);
+    assert_eq!(r.references_per_triangle, 1.0);
 }

@@ -531,21 +531,14 @@ fn example_render() {
         "auto and grid images differ"
     );
 
-    // The kd-tree: identical hits give an identical image; a build without it says so and fails.
+    // The kd-tree: identical hits give an identical image.
     let ran = render("kdtree.ppm", &["64", "48", "kdtree"]);
-    if ran.success {
-        assert_eq!(
-            fs::read(dir.join("kdtree.ppm")).expect("kdtree.ppm"),
-            grid,
-            "kd-tree and grid images differ"
-        );
-    } else {
-        assert!(
-            ran.stderr.contains("RQ_STATUS_UNSUPPORTED"),
-            "{}",
-            ran.describe("render with kdtree failed without saying it is unsupported")
-        );
-    }
+    assert!(ran.success, "{}", ran.describe("render with kdtree failed"));
+    assert_eq!(
+        fs::read(dir.join("kdtree.ppm")).expect("kdtree.ppm"),
+        grid,
+        "kd-tree and grid images differ"
+    );
 
     // Bad command lines: a usage message and a non-zero exit.
     let bad: [&[&str]; 5] = [

@@ -457,6 +457,8 @@ pub unsafe extern "C" fn rq_scene_report_get(
             references_per_triangle,
             r.references_per_triangle
         );
+        write_covered!(out, size, kd_node_count, r.kd_node_count);
+        write_covered!(out, size, kd_depth, r.kd_depth);
         rq_status::RQ_STATUS_OK
     })
 }

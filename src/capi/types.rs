@@ -172,6 +172,10 @@ pub struct rq_scene_report {
     pub expected_rays: u64,
     /// Triangle references per non-degenerate triangle in the structure in use.
     pub references_per_triangle: f64,
+    /// kd-tree nodes, interior and leaves (0 when no kd-tree is held).
+    pub kd_node_count: usize,
+    /// Depth of the kd-tree's deepest leaf (0 when no kd-tree is held).
+    pub kd_depth: u32,
 }
 
 /// An immutable scene (opaque). Free with `rq_scene_free`.

@@ -475,24 +475,22 @@ impl Builder<'_> {
                     _ => {}
                 }
             }
-            match (
-                self.budget
-                    .vec(cl + new_left[a].len(), "kd-tree build events"),
-                self.budget
-                    .vec(cr + new_right[a].len(), "kd-tree build events"),
-            ) {
+            let l = self
+                .budget
+                .vec(cl + new_left[a].len(), "kd-tree build events");
+            let r = self
+                .budget
+                .vec(cr + new_right[a].len(), "kd-tree build events");
+            match (l, r) {
                 (Ok(l), Ok(r)) => {
                     left[a] = l;
                     right[a] = r;
                 }
                 (l, r) => {
+                    failed = l.as_ref().err().or(r.as_ref().err()).copied();
                     for v in [l, r].into_iter().flatten() {
                         self.budget.free(v);
                     }
-                    failed = Some(BuildError::OutOfMemory {
-                        what: "kd-tree build events",
-                        bytes: 0,
-                    });
                     break;
                 }
             }
