@@ -594,17 +594,27 @@ fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
         }
     };
     const CAP: usize = 16;
-    let mut poly = [DVec3::ZERO; CAP];
-    let mut next = [DVec3::ZERO; CAP];
-    for (slot, v) in poly.iter_mut().zip(tri) {
+    let tb = Aabb::of_triangle(tri);
+    // Two buffers used in turn, so a clip copies no more than the vertices it keeps.
+    let mut buf = [[DVec3::ZERO; CAP]; 2];
+    for (slot, v) in buf[0].iter_mut().zip(tri) {
         *slot = v.as_dvec3();
     }
-    let mut n = 3;
+    let (mut from, mut n) = (0usize, 3usize);
     for axis in 0..3 {
-        for (bound, keep_above) in [
-            (f64::from(b.min[axis]), true),
-            (f64::from(b.max[axis]), false),
-        ] {
+        for keep_above in [true, false] {
+            // A plane the triangle's bounds do not cross clips nothing.
+            let bound = if keep_above {
+                if tb.min[axis] >= b.min[axis] {
+                    continue;
+                }
+                f64::from(b.min[axis])
+            } else {
+                if tb.max[axis] <= b.max[axis] {
+                    continue;
+                }
+                f64::from(b.max[axis])
+            };
             let inside = |p: &DVec3| {
                 if keep_above {
                     p[axis] >= bound
@@ -612,16 +622,23 @@ fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
                     p[axis] <= bound
                 }
             };
+            let (src, dst) = if from == 0 {
+                let (x, y) = buf.split_at_mut(1);
+                (&x[0], &mut y[0])
+            } else {
+                let (x, y) = buf.split_at_mut(1);
+                (&y[0], &mut x[0])
+            };
             let mut m = 0;
             for i in 0..n {
-                let cur = poly[i];
-                let nxt = poly[(i + 1) % n];
+                let cur = src[i];
+                let nxt = src[if i + 1 == n { 0 } else { i + 1 }];
                 let (ci, ni) = (inside(&cur), inside(&nxt));
                 if ci {
                     if m == CAP {
                         return fallback();
                     }
-                    next[m] = cur;
+                    dst[m] = cur;
                     m += 1;
                 }
                 if ci != ni {
@@ -631,17 +648,18 @@ fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
                     let t = (bound - cur[axis]) / (nxt[axis] - cur[axis]);
                     let mut x = cur + (nxt - cur) * t;
                     x[axis] = bound;
-                    next[m] = x;
+                    dst[m] = x;
                     m += 1;
                 }
             }
-            core::mem::swap(&mut poly, &mut next);
+            from = 1 - from;
             n = m;
             if n == 0 {
                 return fallback();
             }
         }
     }
+    let poly = &buf[from];
     let mut lo = poly[0];
     let mut hi = poly[0];
     for p in &poly[1..n] {
