@@ -2,3 +2,4 @@
 //! decision rule.
 
 pub mod calibration;
+pub mod decision;

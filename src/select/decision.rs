@@ -1,0 +1,259 @@
+//! The decision of Hapala, Karlík, Havran (2011) for a known ray budget, and the online rule for an
+//! unknown one. Pure arithmetic on cost estimates; where the estimates come from is the cost model's
+//! business.
+
+/// Cost estimates, in seconds, for one scene whose grid is already built.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CostEstimate {
+    /// Seconds per ray on the grid.
+    pub grid_ray_seconds: f64,
+    /// Seconds per ray on the kd-tree.
+    pub kd_ray_seconds: f64,
+    /// Seconds to build the kd-tree.
+    pub kd_build_seconds: f64,
+}
+
+/// What to do with a known budget (mirrors the three outcomes of the paper).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decision {
+    /// The kd-tree is not faster per ray (or the estimates cannot tell): keep the grid.
+    GridFasterPerRay,
+    /// Fewer rays than the break-even workload: keep the grid.
+    BelowBreakEven,
+    /// At least the break-even workload: build the kd-tree.
+    AboveBreakEven,
+}
+
+impl CostEstimate {
+    /// True when every estimate is a number ≥ 0 (infinities allowed).
+    fn is_valid(&self) -> bool {
+        [
+            self.grid_ray_seconds,
+            self.kd_ray_seconds,
+            self.kd_build_seconds,
+        ]
+        .iter()
+        .all(|&x| x >= 0.0)
+    }
+
+    /// Per-ray saving of the kd-tree over the grid; ≤ 0 (or NaN) when there is none.
+    fn saving_per_ray(&self) -> f64 {
+        self.grid_ray_seconds - self.kd_ray_seconds
+    }
+
+    /// The break-even workload W* = T_build / (t_grid − t_kd): `+∞` when the kd-tree is not faster
+    /// per ray, NaN when the estimates are not valid (NaN or negative), 0 when the build is free.
+    pub fn break_even_rays(&self) -> f64 {
+        if !self.is_valid() {
+            return f64::NAN;
+        }
+        let saving = self.saving_per_ray();
+        if !(saving > 0.0) {
+            return f64::INFINITY;
+        }
+        if self.kd_build_seconds == 0.0 {
+            return 0.0;
+        }
+        // An infinite saving (the grid is hopeless) makes W* = 0; an infinite build makes it ∞.
+        self.kd_build_seconds / saving
+    }
+
+    /// The decision for `expected_rays` (> 0): build the kd-tree exactly when `expected_rays ≥ W*`.
+    /// Estimates that cannot tell keep the grid (`GridFasterPerRay`): the grid is already paid for.
+    pub fn decide(&self, expected_rays: u64) -> Decision {
+        let w = self.break_even_rays();
+        if !(w < f64::INFINITY) {
+            // +∞ or NaN.
+            return Decision::GridFasterPerRay;
+        }
+        if expected_rays as f64 >= w {
+            Decision::AboveBreakEven
+        } else {
+            Decision::BelowBreakEven
+        }
+    }
+}
+
+/// The unknown-budget rule: stay on the grid and switch once the excess already paid on the grid,
+/// `(t_grid − t_kd)·rays`, reaches the kd-tree's build cost (ski rental with a discount). With the
+/// switch at exactly W*, the total is never more than `(2 − t_kd/t_grid)×` the better of the two
+/// fixed choices made knowing the budget; switching at the end of a batch adds at most that batch's
+/// excess.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OnlineSwitch {
+    estimate: CostEstimate,
+    rays_on_grid: u64,
+}
+
+impl OnlineSwitch {
+    /// A rule for a scene with these estimates and no rays traced yet.
+    pub fn new(estimate: CostEstimate) -> Self {
+        OnlineSwitch {
+            estimate,
+            rays_on_grid: 0,
+        }
+    }
+
+    /// Rays traced on the grid so far.
+    pub fn rays_on_grid(&self) -> u64 {
+        self.rays_on_grid
+    }
+
+    /// Seconds paid so far beyond what the kd-tree would have cost for the same rays.
+    pub fn excess_paid(&self) -> f64 {
+        let saving = self.estimate.saving_per_ray();
+        if saving > 0.0 {
+            saving * self.rays_on_grid as f64
+        } else {
+            0.0
+        }
+    }
+
+    /// Records `rays` more traced on the grid; true when it is now time to switch.
+    pub fn record(&mut self, rays: u64) -> bool {
+        self.rays_on_grid = self.rays_on_grid.saturating_add(rays);
+        self.should_switch()
+    }
+
+    /// True when the excess paid has reached the build cost (never for a kd-tree that is not
+    /// faster per ray, or for estimates that cannot tell).
+    pub fn should_switch(&self) -> bool {
+        let w = self.estimate.break_even_rays();
+        w < f64::INFINITY && self.rays_on_grid as f64 >= w
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn est(g: f64, k: f64, b: f64) -> CostEstimate {
+        CostEstimate {
+            grid_ray_seconds: g,
+            kd_ray_seconds: k,
+            kd_build_seconds: b,
+        }
+    }
+
+    #[test]
+    fn each_outcome_and_the_boundary() {
+        let e = est(3.0, 1.0, 2000.0); // W* = 1000, exactly in binary
+        assert_eq!(e.break_even_rays(), 1000.0);
+        assert_eq!(e.decide(999), Decision::BelowBreakEven);
+        assert_eq!(e.decide(1000), Decision::AboveBreakEven);
+        assert_eq!(e.decide(u64::MAX), Decision::AboveBreakEven);
+        assert_eq!(
+            est(1e-6, 1e-6, 1e-3).decide(u64::MAX),
+            Decision::GridFasterPerRay
+        );
+        assert_eq!(
+            est(1e-6, 2e-6, 0.0).decide(u64::MAX),
+            Decision::GridFasterPerRay
+        );
+        assert_eq!(est(1e-6, 2e-6, 0.0).break_even_rays(), f64::INFINITY);
+    }
+
+    #[test]
+    fn infinities_and_nan() {
+        // A hopeless grid: W* = 0, any budget builds the kd-tree.
+        assert_eq!(est(f64::INFINITY, 1e-6, 1.0).break_even_rays(), 0.0);
+        assert_eq!(
+            est(f64::INFINITY, 1e-6, 1.0).decide(1),
+            Decision::AboveBreakEven
+        );
+        // An endless build: never.
+        assert_eq!(
+            est(2e-6, 1e-6, f64::INFINITY).break_even_rays(),
+            f64::INFINITY
+        );
+        assert_eq!(
+            est(2e-6, 1e-6, f64::INFINITY).decide(u64::MAX),
+            Decision::GridFasterPerRay
+        );
+        // Both infinite per ray: no saving to speak of.
+        assert_eq!(
+            est(f64::INFINITY, f64::INFINITY, 1.0).decide(u64::MAX),
+            Decision::GridFasterPerRay
+        );
+        // A free build pays at once.
+        assert_eq!(est(2e-6, 1e-6, 0.0).decide(1), Decision::AboveBreakEven);
+        for bad in [
+            est(f64::NAN, 1e-6, 1.0),
+            est(2e-6, f64::NAN, 1.0),
+            est(2e-6, 1e-6, f64::NAN),
+            est(2e-6, -1e-6, 1.0),
+        ] {
+            assert!(bad.break_even_rays().is_nan(), "{bad:?}");
+            assert_eq!(bad.decide(u64::MAX), Decision::GridFasterPerRay, "{bad:?}");
+            assert!(!OnlineSwitch::new(bad).record(u64::MAX));
+        }
+    }
+
+    /// Total seconds for `total` rays under the online rule, in batches of `batch`.
+    fn online_total(e: &CostEstimate, total: u64, batch: u64) -> f64 {
+        let mut rule = OnlineSwitch::new(*e);
+        let mut cost = 0.0;
+        let mut done = 0;
+        while done < total {
+            let n = batch.min(total - done);
+            cost += n as f64 * e.grid_ray_seconds;
+            done += n;
+            if rule.record(n) {
+                // Switched: the rest runs on the kd-tree.
+                return cost + e.kd_build_seconds + (total - done) as f64 * e.kd_ray_seconds;
+            }
+            if !e.break_even_rays().is_finite() {
+                // It never switches: the rest stays on the grid.
+                return cost + (total - done) as f64 * e.grid_ray_seconds;
+            }
+        }
+        cost
+    }
+
+    #[test]
+    fn online_rule_is_within_its_competitive_bound() {
+        let scenes = [
+            est(2e-6, 1e-6, 1e-3),
+            est(5e-6, 1e-6, 0.5),
+            est(1.1e-6, 1e-6, 0.02),
+            est(1e-6, 2e-6, 0.01),
+            est(3e-7, 1e-7, 2.0),
+        ];
+        for e in scenes {
+            let bound = if e.grid_ray_seconds > e.kd_ray_seconds {
+                2.0 - e.kd_ray_seconds / e.grid_ray_seconds
+            } else {
+                1.0
+            };
+            let w = e.break_even_rays();
+            for exp in 0..=12 {
+                for mantissa in [1u64, 3] {
+                    let total = mantissa * 10u64.pow(exp);
+                    // Batches small against W*, as between passes of a renderer.
+                    let batch = if w.is_finite() {
+                        ((w / 64.0) as u64).max(1)
+                    } else {
+                        1000
+                    };
+                    let online = online_total(&e, total, batch);
+                    let oracle = (total as f64 * e.grid_ray_seconds)
+                        .min(e.kd_build_seconds + total as f64 * e.kd_ray_seconds);
+                    let slack = 1.0 + 1.0 / 32.0; // at most one batch of excess past W*
+                    assert!(
+                        online <= oracle * bound * slack + 1e-15,
+                        "{e:?}, {total} rays: online {online}, oracle {oracle}, bound {bound}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn switch_happens_exactly_at_the_break_even() {
+        let mut rule = OnlineSwitch::new(est(3.0, 1.0, 2000.0));
+        assert!(!rule.record(999));
+        assert_eq!(rule.excess_paid(), 1998.0);
+        assert!(rule.record(1));
+        assert_eq!(rule.rays_on_grid(), 1000);
+    }
+}
