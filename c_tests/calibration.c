@@ -10,6 +10,58 @@ static int is_calib_status(rq_status s) {
          s == RQ_STATUS_CALIB_TRUNCATED || s == RQ_STATUS_CALIB_CHECKSUM || s == RQ_STATUS_CALIB_VALUE_OUT_OF_RANGE;
 }
 
+/* The committed default blob, read from its file: it loads, equals the built-in calibration, and
+ * AUTO scenes built with it report a decision whose outcome matches the structure they hold. */
+static void test_blob_file(const char *path, const unsigned char *builtin_blob, size_t builtin_len) {
+  FILE *f = fopen(path, "rb");
+  CHECKF(f != NULL, "cannot open %s", path);
+  if (!f) {
+    return;
+  }
+  unsigned char data[BUF];
+  size_t n = fread(data, 1, sizeof data, f);
+  fclose(f);
+  rq_calibration *calib = NULL;
+  CHECK_STATUS(rq_calibration_from_bytes(data, n, &calib), RQ_STATUS_OK);
+  CHECKF(n == builtin_len && memcmp(data, builtin_blob, n) == 0, "%s differs from the built-in blob", path);
+  if (!calib) {
+    return;
+  }
+  test_mesh m = mesh_cube(6);
+  rq_mesh_desc d = mesh_desc(&m);
+  const uint64_t budgets[] = {1, 1000000000000ull, 0};
+  for (size_t i = 0; i < sizeof budgets / sizeof budgets[0]; i++) {
+    rq_build_options o;
+    rq_build_options_init(&o);
+    o.expected_rays = budgets[i];
+    rq_scene *scene = NULL;
+    CHECK_STATUS(rq_scene_build(&d, &o, calib, &scene), RQ_STATUS_OK);
+    if (!scene) {
+      continue;
+    }
+    rq_scene_report r;
+    memset(&r, 0, sizeof r);
+    r.struct_size = (uint32_t)sizeof r;
+    CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
+    CHECKF(r.grid_ray_seconds > 0 && r.kd_ray_seconds > 0 && r.kd_build_seconds > 0,
+           "budget %llu: estimates %g %g %g", (unsigned long long)budgets[i], r.grid_ray_seconds,
+           r.kd_ray_seconds, r.kd_build_seconds);
+    if (budgets[i] == 0) {
+      CHECK(r.outcome == RQ_OUTCOME_ONLINE_ON_GRID && r.structure == RQ_STRUCTURE_GRID);
+    } else if (r.outcome == RQ_OUTCOME_ABOVE_BREAK_EVEN) {
+      CHECK(r.structure == RQ_STRUCTURE_KDTREE && (double)budgets[i] >= r.break_even_rays);
+    } else {
+      CHECKF(r.structure == RQ_STRUCTURE_GRID &&
+                 (r.outcome == RQ_OUTCOME_GRID_FASTER_PER_RAY || (double)budgets[i] < r.break_even_rays),
+             "budget %llu: outcome %u with W* %g", (unsigned long long)budgets[i], (unsigned)r.outcome,
+             r.break_even_rays);
+    }
+    rq_scene_free(scene);
+  }
+  mesh_free(&m);
+  rq_calibration_free(calib);
+}
+
 int main(void) {
   const rq_calibration *builtin = rq_calibration_builtin();
   CHECK(builtin != NULL);
@@ -168,5 +220,6 @@ int main(void) {
     CHECK_STATUS(rq_calibration_to_bytes(rq_calibration_builtin(), third, sizeof third, &len3), RQ_STATUS_OK);
     CHECK(len3 == len && memcmp(third, blob, len) == 0);
   }
+  test_blob_file(RQ_DEFAULT_BLOB, blob, len);
   return test_finish("calibration");
 }

@@ -347,14 +347,16 @@ rq_status rq_scene_intersect_n(const struct rq_scene *scene,
 rq_status rq_scene_report_get(const struct rq_scene *scene, struct rq_scene_report *out);
 
 // Tells the scene how many rays were traced since the last call and how many remain (0 = unknown).
-// Call between batches, never concurrently with queries. Until the kd-tree exists there is nothing to
-// switch to, so the scene stays on the grid.
+// Call between batches, never concurrently with queries. A scene built with AUTO and an unknown
+// budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
+// estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
+// estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
+// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT) or memory runs out, the scene
+// stays on the grid, unchanged and usable.
 //
 // # Safety
 // `scene` is NULL or a live handle not being queried by another thread.
-rq_status rq_scene_update(struct rq_scene *scene,
-                          uint64_t rays_traced,
-                          uint64_t rays_remaining);
+rq_status rq_scene_update(struct rq_scene *scene, uint64_t rays_traced, uint64_t rays_remaining);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -23,6 +23,10 @@ mod imp {
         x.floor()
     }
     #[inline(always)]
+    pub fn log2_64(x: f64) -> f64 {
+        x.log2()
+    }
+    #[inline(always)]
     pub fn sin(x: f32) -> f32 {
         x.sin()
     }
@@ -53,6 +57,10 @@ mod imp {
     #[inline(always)]
     pub fn floor64(x: f64) -> f64 {
         libm::floor(x)
+    }
+    #[inline(always)]
+    pub fn log2_64(x: f64) -> f64 {
+        libm::log2(x)
     }
     #[inline(always)]
     pub fn sin(x: f32) -> f32 {

@@ -8,6 +8,8 @@ use crate::error::BuildError;
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
+use crate::select::decision::{CostEstimate, Decision, OnlineSwitch};
+use crate::select::sample::{sample_grid, RaySource, SampleParams};
 
 /// Which structure a scene should use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -50,6 +52,8 @@ pub struct BuildOptions {
     pub grid: GridParams,
     /// kd-tree parameters; default [`KdTreeParams::DEFAULT`].
     pub kdtree: KdTreeParams,
+    /// The sample rays the selector makes when the caller gives none (`Auto` only).
+    pub samples: SampleParams,
 }
 
 impl BuildOptions {
@@ -60,6 +64,7 @@ impl BuildOptions {
         memory_limit: 0,
         grid: GridParams::DEFAULT,
         kdtree: KdTreeParams::DEFAULT,
+        samples: SampleParams::DEFAULT,
     };
 }
 
@@ -158,78 +163,182 @@ pub struct SceneReport {
 /// An immutable scene: safe to query from many threads at once.
 ///
 /// Guarantees: queries never allocate and never panic; every structure it may hold returns the same
-/// bit-identical hits.
+/// bit-identical hits, so a switch of structure never changes an answer.
 #[derive(Debug)]
 pub struct Scene {
     mesh: TriMesh,
     accel: Accel,
     report: SceneReport,
     rays_traced: u64,
+    options: BuildOptions,
+    /// The unknown-budget rule while the scene is on the grid with `Auto` (None otherwise).
+    online: Option<OnlineSwitch>,
+}
+
+/// The report's estimate fields: NaN where nothing was estimated.
+fn estimate_fields(e: Option<&CostEstimate>) -> [f64; 4] {
+    match e {
+        Some(e) => [
+            e.grid_ray_seconds,
+            e.kd_ray_seconds,
+            e.kd_build_seconds,
+            e.break_even_rays(),
+        ],
+        None => [f64::NAN; 4],
+    }
 }
 
 impl Scene {
-    /// Validates the mesh and builds the requested structure. Until the selector lands, `Auto` is
-    /// served by the grid (outcome `OnlineOnGrid` for an unknown budget, `Forced` otherwise,
-    /// estimates NaN).
+    /// Validates the mesh and builds the requested structure. `Auto` builds the grid, traces the
+    /// selector's sample rays through it, estimates the costs with `calibration`, and then: with a
+    /// known `expected_rays`, keeps the grid or replaces it by the kd-tree (the grid is released
+    /// first, so the memory limit must hold the mesh and the kd-tree); with an unknown budget, stays
+    /// on the grid and lets [`Scene::update`] switch.
     pub fn build(
         src: &impl MeshSource,
         options: &BuildOptions,
-        _calibration: &Calibration,
+        calibration: &Calibration,
     ) -> Result<Scene, BuildError> {
-        let (structure, outcome) = match options.structure {
-            Structure::Grid => (Structure::Grid, Outcome::Forced),
-            Structure::KdTree => (Structure::KdTree, Outcome::Forced),
-            Structure::Auto if options.expected_rays == 0 => {
-                (Structure::Grid, Outcome::OnlineOnGrid)
-            }
-            Structure::Auto => (Structure::Grid, Outcome::Forced),
-        };
+        Scene::build_with_samples(src, options, calibration, None)
+    }
+
+    /// [`Scene::build`] with the caller's representative rays as the selector's samples (`None`:
+    /// the library makes them, see [`SampleParams`]).
+    pub fn build_with_samples(
+        src: &impl MeshSource,
+        options: &BuildOptions,
+        calibration: &Calibration,
+        samples: Option<&dyn RaySource>,
+    ) -> Result<Scene, BuildError> {
         let mut budget = MemoryBudget::new(options.memory_limit);
         let mesh = TriMesh::from_source(src, &mut budget)?;
-        let accel = match Accel::build(structure, &mesh, options, &mut budget) {
+        let first = match options.structure {
+            Structure::KdTree => Structure::KdTree,
+            _ => Structure::Grid,
+        };
+        let mut accel = match Accel::build(first, &mesh, options, &mut budget) {
             Ok(a) => a,
             Err(e) => {
                 mesh.release(&mut budget);
                 return Err(e);
             }
         };
+        let mut outcome = Outcome::Forced;
+        let mut estimate = None;
+        let mut online = None;
+        if let (Structure::Auto, Accel::Grid(grid)) = (options.structure, &accel) {
+            let features = sample_grid(grid, &mesh, samples, &options.samples);
+            let e = calibration.estimate(&features);
+            estimate = Some(e);
+            if options.expected_rays == 0 {
+                outcome = Outcome::OnlineOnGrid;
+                online = Some(OnlineSwitch::new(e));
+            } else {
+                outcome = match e.decide(options.expected_rays) {
+                    Decision::GridFasterPerRay => Outcome::GridFasterPerRay,
+                    Decision::BelowBreakEven => Outcome::BelowBreakEven,
+                    Decision::AboveBreakEven => Outcome::AboveBreakEven,
+                };
+            }
+            if outcome == Outcome::AboveBreakEven {
+                if let Accel::Grid(g) = accel {
+                    g.release(&mut budget);
+                }
+                accel = match Accel::build(Structure::KdTree, &mesh, options, &mut budget) {
+                    Ok(a) => a,
+                    Err(e) => {
+                        mesh.release(&mut budget);
+                        return Err(e);
+                    }
+                };
+            }
+        }
+        let [grid_ray_seconds, kd_ray_seconds, kd_build_seconds, break_even_rays] =
+            estimate_fields(estimate.as_ref());
+        let mut scene = Scene {
+            mesh,
+            accel,
+            report: SceneReport {
+                structure: Structure::Grid,
+                outcome,
+                triangle_count: 0,
+                memory_bytes: 0,
+                grid_resolution: [0; 3],
+                grid_ray_seconds,
+                kd_ray_seconds,
+                kd_build_seconds,
+                break_even_rays,
+                expected_rays: options.expected_rays,
+                references_per_triangle: 0.0,
+                kd_node_count: 0,
+                kd_depth: 0,
+            },
+            rays_traced: 0,
+            options: *options,
+            online,
+        };
+        scene.refresh_report();
+        Ok(scene)
+    }
+
+    /// Brings the report's structure fields up to date with the structure held.
+    fn refresh_report(&mut self) {
+        let (mesh, accel, r) = (&self.mesh, &self.accel, &mut self.report);
         let live = mesh.len() - mesh.degenerate_count();
-        let (grid_resolution, kd_node_count, kd_depth) = match &accel {
+        (r.grid_resolution, r.kd_node_count, r.kd_depth) = match accel {
             Accel::Grid(g) => (g.resolution(), 0, 0),
             Accel::KdTree(k) => ([0; 3], k.node_count(), k.depth()),
         };
-        let report = SceneReport {
-            structure: accel.structure(),
-            outcome,
-            triangle_count: mesh.len(),
-            memory_bytes: mesh.memory_bytes() + accel.memory_bytes(),
-            grid_resolution,
-            grid_ray_seconds: f64::NAN,
-            kd_ray_seconds: f64::NAN,
-            kd_build_seconds: f64::NAN,
-            break_even_rays: f64::NAN,
-            expected_rays: options.expected_rays,
-            references_per_triangle: if live == 0 {
-                0.0
-            } else {
-                accel.reference_count() as f64 / live as f64
-            },
-            kd_node_count,
-            kd_depth,
+        r.structure = accel.structure();
+        r.triangle_count = mesh.len();
+        r.memory_bytes = mesh.memory_bytes() + accel.memory_bytes();
+        r.references_per_triangle = if live == 0 {
+            0.0
+        } else {
+            accel.reference_count() as f64 / live as f64
         };
-        Ok(Scene {
-            mesh,
-            accel,
-            report,
-            rays_traced: 0,
-        })
     }
 
-    /// Records rays traced since the last call and rays still expected (0 = unknown), between batches.
-    /// The selector will use this to switch structures; until the kd-tree exists the scene stays on
-    /// the grid and only the count changes.
-    pub fn update(&mut self, rays_traced: u64, _rays_remaining: u64) {
+    /// Between batches (never during queries): `rays_traced` since the last call and
+    /// `rays_remaining` still expected (0 = unknown). A scene built with `Auto` and an unknown budget
+    /// that is still on the grid switches to the kd-tree when the remaining budget is at least W*,
+    /// or, with the budget still unknown, once the excess paid on the grid reaches the kd-tree's
+    /// build cost. The kd-tree is built while the grid is still held (the memory limit must hold
+    /// both); if that fails the scene stays on the grid, unchanged, and the error is returned.
+    pub fn update(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
+        let Some(rule) = self.online.as_mut() else {
+            return Ok(());
+        };
+        let due = rule.record(rays_traced);
+        let switch = if rays_remaining > 0 {
+            let estimate = self.report_estimate();
+            estimate.decide(rays_remaining) == Decision::AboveBreakEven
+        } else {
+            due
+        };
+        if !switch {
+            return Ok(());
+        }
+        let mut budget = MemoryBudget::new(self.options.memory_limit);
+        budget.charge(
+            self.mesh.memory_bytes() + self.accel.memory_bytes(),
+            "the scene's mesh and grid",
+        )?;
+        let tree = KdTree::build(&self.mesh, &self.options.kdtree, &mut budget)?;
+        self.accel = Accel::KdTree(tree);
+        self.online = None;
+        self.report.outcome = Outcome::OnlineSwitched;
+        self.refresh_report();
+        Ok(())
+    }
+
+    fn report_estimate(&self) -> CostEstimate {
+        CostEstimate {
+            grid_ray_seconds: self.report.grid_ray_seconds,
+            kd_ray_seconds: self.report.kd_ray_seconds,
+            kd_build_seconds: self.report.kd_build_seconds,
+        }
     }
 
     /// Rays reported through [`Scene::update`] so far.

@@ -59,61 +59,106 @@ pub fn mix64(mut z: u64) -> u64 {
     z ^ (z >> 31)
 }
 
-/// Pinhole camera rays (`side × side`, one jittered sample per pixel) looking at the centre of
-/// `bounds` from a diagonal, one box diagonal away, with a 45° field of view.
+/// A pinhole camera looking at the centre of a box from a diagonal, one box diagonal away, with a
+/// 45° field of view: the view every workload, test and the selector's sample rays use.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    eye: Vec3,
+    forward: Vec3,
+    right: Vec3,
+    up: Vec3,
+    side: usize,
+}
+
+impl Camera {
+    /// The camera for `bounds` with an image of `side × side` pixels.
+    pub fn looking_at(bounds: &Aabb, side: usize) -> Camera {
+        let center = 0.5 * (bounds.min + bounds.max);
+        let diag = bounds.extent().length().max(f32::MIN_POSITIVE);
+        let eye = center + Vec3::new(0.62, -0.55, 0.45) * diag;
+        let forward = (center - eye).normalize_or(Vec3::X);
+        let up = if forward.z.abs() > 0.9 {
+            Vec3::Y
+        } else {
+            Vec3::Z
+        };
+        let right = forward.cross(up).normalize_or(Vec3::Y);
+        let up = right.cross(forward);
+        Camera {
+            eye,
+            forward,
+            right,
+            up,
+            side: side.max(1),
+        }
+    }
+
+    /// The ray through pixel `(i, j)`, jittered inside the pixel by `rng`.
+    pub fn ray(&self, i: usize, j: usize, rng: &mut SplitMix64) -> Ray {
+        let half = 0.414_213_57; // tan(22.5°)
+        let side = self.side as f32;
+        let x = (2.0 * (i as f32 + rng.next_f32()) / side - 1.0) * half;
+        let y = (1.0 - 2.0 * (j as f32 + rng.next_f32()) / side) * half;
+        Ray::new(self.eye, self.forward + x * self.right + y * self.up)
+    }
+}
+
+/// Pinhole camera rays (`side × side`, one jittered sample per pixel) of [`Camera::looking_at`].
 pub fn camera_rays(bounds: &Aabb, side: usize, rng: &mut SplitMix64) -> Vec<Ray> {
-    let center = 0.5 * (bounds.min + bounds.max);
-    let diag = bounds.extent().length().max(f32::MIN_POSITIVE);
-    let eye = center + Vec3::new(0.62, -0.55, 0.45) * diag;
-    let forward = (center - eye).normalize_or(Vec3::X);
-    let up = if forward.z.abs() > 0.9 {
-        Vec3::Y
-    } else {
-        Vec3::Z
-    };
-    let right = forward.cross(up).normalize_or(Vec3::Y);
-    let up = right.cross(forward);
-    let half = 0.414_213_57; // tan(22.5°)
+    let camera = Camera::looking_at(bounds, side);
     let mut rays = Vec::with_capacity(side * side);
     for j in 0..side {
         for i in 0..side {
-            let x = (2.0 * (i as f32 + rng.next_f32()) / side as f32 - 1.0) * half;
-            let y = (1.0 - 2.0 * (j as f32 + rng.next_f32()) / side as f32) * half;
-            rays.push(Ray::new(eye, forward + x * right + y * up));
+            rays.push(camera.ray(i, j, rng));
         }
     }
     rays
 }
 
-/// One diffuse bounce from every hit of `primary`: the origin is the hit point, the direction
-/// cosine-distributed about the geometric normal facing the incoming ray, and `tmin` a small offset
-/// (1e-5 of the scene diagonal) so the bounce does not hit its own triangle.
+/// The offset a bounce starts at so that it does not hit its own triangle: 1e-5 of the scene's
+/// diagonal.
+pub fn bounce_offset(mesh: &TriMesh) -> f32 {
+    1e-5 * mesh.bounds().extent().length()
+}
+
+/// A diffuse bounce from `hit` of `ray`: the origin is the hit point, the direction
+/// cosine-distributed about the geometric normal facing the incoming ray, and `tmin = offset`
+/// (see [`bounce_offset`]). `None` when `hit` is a miss.
+pub fn bounce(
+    mesh: &TriMesh,
+    ray: &Ray,
+    hit: &Hit,
+    offset: f32,
+    rng: &mut SplitMix64,
+) -> Option<Ray> {
+    let tri = mesh.triangle(hit.prim)?;
+    let mut n = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
+    if n.dot(ray.dir) > 0.0 {
+        n = -n;
+    }
+    let mut d = rng.unit_vector();
+    if d.dot(n) < 0.0 {
+        d = -d;
+    }
+    Some(Ray::segment(
+        ray.org + hit.t * ray.dir,
+        d + n,
+        offset,
+        f32::INFINITY,
+    ))
+}
+
+/// One diffuse bounce (see [`bounce`]) from every hit of `primary`.
 pub fn bounce_rays(
     mesh: &TriMesh,
     primary: &[Ray],
     hits: &[Hit],
     rng: &mut SplitMix64,
 ) -> Vec<Ray> {
-    let eps = 1e-5 * mesh.bounds().extent().length();
+    let offset = bounce_offset(mesh);
     let mut out = Vec::with_capacity(primary.len());
     for (ray, hit) in primary.iter().zip(hits) {
-        let Some(tri) = mesh.triangle(hit.prim) else {
-            continue;
-        };
-        let mut n = (tri[1] - tri[0]).cross(tri[2] - tri[0]).normalize_or_zero();
-        if n.dot(ray.dir) > 0.0 {
-            n = -n;
-        }
-        let mut d = rng.unit_vector();
-        if d.dot(n) < 0.0 {
-            d = -d;
-        }
-        out.push(Ray::segment(
-            ray.org + hit.t * ray.dir,
-            d + n,
-            eps,
-            f32::INFINITY,
-        ));
+        out.extend(bounce(mesh, ray, hit, offset, rng));
     }
     out
 }

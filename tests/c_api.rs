@@ -284,9 +284,16 @@ fn run_program(exe: &Path, dir: &Path, args: &[&str]) -> Ran {
 /// Compiles `c_tests/<name>.c`, runs it, and fails with its output unless it exits 0 and reports
 /// zero failures.
 fn run_c_test(name: &str) {
+    run_c_test_with(name, &[]);
+}
+
+/// Compiles and runs `c_tests/{name}.c` with extra compiler flags.
+fn run_c_test_with(name: &str, flags: &[&str]) {
     let dir = scratch(name);
     let source = root().join("c_tests").join(format!("{name}.c"));
-    let exe = build_program(&dir, name, &source, &["-DRQ_WITH_OBJ"]);
+    let mut all = vec!["-DRQ_WITH_OBJ"];
+    all.extend_from_slice(flags);
+    let exe = build_program(&dir, name, &source, &all);
     let ran = run_program(&exe, &dir, &[]);
     assert!(
         ran.success,
@@ -308,7 +315,9 @@ fn run_c_test(name: &str) {
 
 #[test]
 fn c_calibration() {
-    run_c_test("calibration");
+    let blob = root().join("calib").join("default.rqcal");
+    let define = format!("-DRQ_DEFAULT_BLOB=\"{}\"", blob.display());
+    run_c_test_with("calibration", &[&define]);
 }
 
 #[test]

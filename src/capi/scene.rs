@@ -13,6 +13,7 @@ use crate::mesh::MeshSource;
 use crate::ray::{Hit, Ray};
 use crate::scene::{BuildOptions, Outcome, Scene, Structure};
 use crate::select::calibration::Calibration;
+use crate::select::sample::RaySource;
 
 /// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
 /// no error callback. Does nothing when `opts` is NULL.
@@ -46,6 +47,8 @@ struct Options {
     structure: Structure,
     expected_rays: u64,
     memory_limit: usize,
+    sample_rays: *const rq_ray,
+    sample_ray_count: usize,
     on_error: rq_error_fn,
     user: *mut core::ffi::c_void,
 }
@@ -78,6 +81,8 @@ unsafe fn read_options(
         structure: Structure::Auto,
         expected_rays: 0,
         memory_limit: 0,
+        sample_rays: ptr::null(),
+        sample_ray_count: 0,
         on_error: None,
         user: ptr::null_mut(),
     };
@@ -110,9 +115,9 @@ unsafe fn read_options(
     };
     o.expected_rays = read_covered!(p, size, expected_rays, u64, 0);
     o.memory_limit = read_covered!(p, size, memory_limit, usize, 0);
-    let samples: *const rq_ray = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
-    let sample_count: usize = read_covered!(p, size, sample_ray_count, usize, 0);
-    if samples.is_null() && sample_count != 0 {
+    o.sample_rays = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
+    o.sample_ray_count = read_covered!(p, size, sample_ray_count, usize, 0);
+    if o.sample_rays.is_null() && o.sample_ray_count != 0 {
         return Err((
             rq_status::RQ_STATUS_NULL_ARGUMENT,
             "rq_build_options.sample_rays is NULL but sample_ray_count is not 0",
@@ -120,6 +125,22 @@ unsafe fn read_options(
         ));
     }
     Ok(o)
+}
+
+/// The caller's sample rays (`rq_build_options.sample_rays`), read one at a time, unaligned.
+struct CallerRays {
+    rays: *const rq_ray,
+    count: usize,
+}
+
+impl RaySource for CallerRays {
+    fn ray_count(&self) -> usize {
+        self.count
+    }
+    fn ray(&self, i: usize) -> Ray {
+        // SAFETY: i < count and the caller promised `count` readable rays (rq_scene_build's contract).
+        to_ray(&unsafe { ptr::read_unaligned(self.rays.add(i)) })
+    }
 }
 
 /// The caller's strided arrays, checked for NULL and address overflow before the first read.
@@ -258,7 +279,16 @@ pub unsafe extern "C" fn rq_scene_build(
             memory_limit: o.memory_limit,
             ..BuildOptions::DEFAULT
         };
-        let scene = match Scene::build(&raw, &options, calibration) {
+        let samples = CallerRays {
+            rays: o.sample_rays,
+            count: o.sample_ray_count,
+        };
+        let samples: Option<&dyn RaySource> = if o.sample_rays.is_null() {
+            None
+        } else {
+            Some(&samples)
+        };
+        let scene = match Scene::build_with_samples(&raw, &options, calibration, samples) {
             Ok(s) => s,
             Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
         };
@@ -464,8 +494,12 @@ pub unsafe extern "C" fn rq_scene_report_get(
 }
 
 /// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown).
-/// Call between batches, never concurrently with queries. Until the kd-tree exists there is nothing to
-/// switch to, so the scene stays on the grid.
+/// Call between batches, never concurrently with queries. A scene built with AUTO and an unknown
+/// budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
+/// estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
+/// estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
+/// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT) or memory runs out, the scene
+/// stays on the grid, unchanged and usable.
 ///
 /// # Safety
 /// `scene` is NULL or a live handle not being queried by another thread.
@@ -480,7 +514,9 @@ pub unsafe extern "C" fn rq_scene_update(
         let Some(s) = (unsafe { (scene as *mut Scene).as_mut() }) else {
             return rq_status::RQ_STATUS_NULL_ARGUMENT;
         };
-        s.update(rays_traced, rays_remaining);
-        rq_status::RQ_STATUS_OK
+        match s.update(rays_traced, rays_remaining) {
+            Ok(()) => rq_status::RQ_STATUS_OK,
+            Err(e) => e.into(),
+        }
     })
 }

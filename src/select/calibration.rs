@@ -21,13 +21,13 @@ pub const CONSTANTS: [Constant; 8] = [
         name: "grid_build_ns_per_triangle",
         min: 0.0,
         max: 1e6,
-        meaning: "grid build time per triangle",
+        meaning: "grid build time per triangle (reported, not needed to decide)",
     },
     Constant {
-        name: "grid_build_ns_per_reference",
+        name: "grid_ns_per_ray",
         min: 0.0,
         max: 1e6,
-        meaning: "grid build time per cell reference",
+        meaning: "fixed grid cost per ray",
     },
     Constant {
         name: "grid_ns_per_cell",
@@ -39,7 +39,7 @@ pub const CONSTANTS: [Constant; 8] = [
         name: "grid_ns_per_test",
         min: 0.0,
         max: 1e6,
-        meaning: "triangle test time in the grid",
+        meaning: "grid time per triangle test",
     },
     Constant {
         name: "kd_build_ns_per_nlogn",
@@ -48,22 +48,22 @@ pub const CONSTANTS: [Constant; 8] = [
         meaning: "kd-tree build time per N·log2 N",
     },
     Constant {
-        name: "kd_ns_per_node",
+        name: "kd_ns_per_hit_ray",
         min: 0.0,
         max: 1e6,
-        meaning: "kd-tree traversal time per node visited",
+        meaning: "kd-tree time per ray that hits, constant part",
     },
     Constant {
-        name: "kd_ns_per_test",
+        name: "kd_ns_per_hit_ray_per_log2n",
         min: 0.0,
         max: 1e6,
-        meaning: "triangle test time in the kd-tree",
+        meaning: "kd-tree time per ray that hits, per log2 N",
     },
     Constant {
-        name: "kd_ns_per_ray",
+        name: "kd_ns_per_miss_ray",
         min: 0.0,
         max: 1e6,
-        meaning: "fixed kd-tree cost per ray",
+        meaning: "kd-tree time per ray that misses everything",
     },
 ];
 
@@ -84,7 +84,7 @@ pub struct Calibration {
 /// Blob magic: the first eight bytes of every calibration blob.
 pub const MAGIC: [u8; 8] = *b"RQCALIB\0";
 /// Major format version this reader understands.
-pub const FORMAT_MAJOR: u16 = 1;
+pub const FORMAT_MAJOR: u16 = 2;
 /// Minor format version this writer produces.
 pub const FORMAT_MINOR: u16 = 0;
 /// Bytes before the payload.

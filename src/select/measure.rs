@@ -1,0 +1,156 @@
+//! Measuring a scene for the calibration (std only: it needs a clock). The path-tracer-like
+//! workload is camera rays plus one diffuse bounce per hit; times are medians of repeated runs, on
+//! the thread's CPU clock where Linux offers one (a shared VM's stolen time is then not counted).
+
+use std::time::Instant;
+use std::vec::Vec;
+
+use super::fit::Observation;
+use super::model::SceneFeatures;
+use super::sample::{sample_grid, SampleParams};
+use crate::accel::grid::{GridParams, GridWork, UniformGrid};
+use crate::accel::kdtree::{KdTree, KdTreeParams};
+use crate::accel::RayQuery;
+use crate::budget::MemoryBudget;
+use crate::error::BuildError;
+use crate::mesh::TriMesh;
+use crate::ray::{Hit, Ray};
+use crate::workload::{bounce_rays, camera_rays, SplitMix64};
+
+/// How to measure.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MeasureParams {
+    /// Camera image side of the workload (`side²` primary rays plus their bounces).
+    pub workload_side: u32,
+    /// Repetitions of each timing (the median is kept).
+    pub repeats: u32,
+    /// Grid parameters.
+    pub grid: GridParams,
+    /// kd-tree parameters.
+    pub kdtree: KdTreeParams,
+    /// The selector's sample rays, recorded as [`Observation::sample`].
+    pub samples: SampleParams,
+    /// Seed of the workload (a different one from the samples' so they are not the same rays).
+    pub seed: u64,
+}
+
+impl MeasureParams {
+    /// 128² camera rays and bounces, 3 repeats, default structures and samples.
+    pub const DEFAULT: MeasureParams = MeasureParams {
+        workload_side: 128,
+        repeats: 3,
+        grid: GridParams::DEFAULT,
+        kdtree: KdTreeParams::DEFAULT,
+        samples: SampleParams::DEFAULT,
+        seed: 0xca11_b0a7,
+    };
+}
+
+/// Seconds this thread has run on a CPU (`CLOCK_THREAD_CPUTIME_ID`, so time stolen by a shared VM
+/// or spent in other threads does not count), or wall time where that clock is missing.
+pub fn thread_seconds() -> f64 {
+    thread_cpu_seconds().unwrap_or_else(|| {
+        static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
+        START.get_or_init(Instant::now).elapsed().as_secs_f64()
+    })
+}
+
+#[cfg(target_os = "linux")]
+fn thread_cpu_seconds() -> Option<f64> {
+    use core::ffi::{c_int, c_long};
+    #[repr(C)]
+    struct Timespec {
+        tv_sec: c_long,
+        tv_nsec: c_long,
+    }
+    extern "C" {
+        fn clock_gettime(clock: c_int, tp: *mut Timespec) -> c_int;
+    }
+    const CLOCK_THREAD_CPUTIME_ID: c_int = 3;
+    let mut ts = Timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes one timespec to the pointer it is given, which is valid.
+    let ok = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0;
+    ok.then_some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
+}
+
+#[cfg(not(target_os = "linux"))]
+fn thread_cpu_seconds() -> Option<f64> {
+    None
+}
+
+/// The median of `repeats` timings of `f`, in nanoseconds, and the last result.
+pub fn median_ns<T>(repeats: u32, mut f: impl FnMut() -> T) -> (f64, T) {
+    let mut times = Vec::new();
+    let mut last = None;
+    for _ in 0..repeats.max(1) {
+        let t = thread_seconds();
+        let r = f();
+        times.push((thread_seconds() - t) * 1e9);
+        last = Some(r);
+    }
+    times.sort_by(f64::total_cmp);
+    let r = last.expect("at least one run");
+    (times[times.len() / 2], r)
+}
+
+/// The workload rays for `mesh`: camera rays and one diffuse bounce per hit.
+pub fn workload(mesh: &TriMesh, side: u32, seed: u64) -> Vec<Ray> {
+    let mut rng = SplitMix64::new(seed);
+    let mut rays = camera_rays(&mesh.bounds(), side as usize, &mut rng);
+    let reference = crate::accel::brute::BruteForce::new(mesh);
+    let grid = UniformGrid::build(mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0));
+    let hits: Vec<Hit> = match &grid {
+        Ok(g) => rays.iter().map(|r| g.intersect(mesh, r)).collect(),
+        Err(_) => rays.iter().map(|r| reference.intersect(mesh, r)).collect(),
+    };
+    let bounces = bounce_rays(mesh, &rays, &hits, &mut rng);
+    rays.extend(bounces);
+    rays
+}
+
+fn trace(accel: &dyn RayQuery, mesh: &TriMesh, rays: &[Ray]) -> u32 {
+    rays.iter().fold(0u32, |acc, r| {
+        acc.wrapping_add(accel.intersect(mesh, r).prim)
+    })
+}
+
+/// Builds both structures on `mesh`, times the builds and the workload on each, and records what the
+/// workload and the selector's sample rays did on the grid.
+pub fn observe(mesh: &TriMesh, params: &MeasureParams) -> Result<Observation, BuildError> {
+    let (grid_build_ns, grid) = median_ns(params.repeats, || {
+        UniformGrid::build(mesh, &params.grid, &mut MemoryBudget::new(0))
+    });
+    let grid = grid?;
+    let (kd_build_ns, tree) = median_ns(params.repeats, || {
+        KdTree::build(mesh, &params.kdtree, &mut MemoryBudget::new(0))
+    });
+    let tree = tree?;
+    let rays = workload(mesh, params.workload_side, params.seed);
+    let mut work = SceneFeatures {
+        triangles: mesh.len() - mesh.degenerate_count(),
+        ..SceneFeatures::default()
+    };
+    for r in &rays {
+        let mut w = GridWork::default();
+        let h = grid.intersect_counted(mesh, r, &mut w);
+        work.add_ray(h.is_hit(), w.cells, w.tests);
+    }
+    let n = rays.len().max(1) as f64;
+    let (grid_ns, _) = median_ns(params.repeats, || trace(&grid, mesh, &rays));
+    let (kd_ns, _) = median_ns(params.repeats, || trace(&tree, mesh, &rays));
+    let (sample_ns, sample) = median_ns(params.repeats, || {
+        sample_grid(&grid, mesh, None, &params.samples)
+    });
+    Ok(Observation {
+        workload: work,
+        sample,
+        sample_grid_ray_ns: sample_ns / sample.rays.max(1) as f64,
+        grid_build_ns,
+        kd_build_ns,
+        grid_ray_ns: grid_ns / n,
+        kd_ray_ns: kd_ns / n,
+    })
+}

@@ -1,0 +1,127 @@
+//! The cost model: what a scene's features and the calibration predict.
+//!
+//! Each part predicts one cost (nanoseconds) as the dot product of its terms with a run of the
+//! calibration's constants. The fit ([`crate::select::fit`]) uses the same terms, so the model is
+//! defined once, here.
+
+use core::ops::Range;
+
+use super::calibration::Calibration;
+use super::decision::CostEstimate;
+use crate::math;
+
+/// What the selector knows of a scene: its size and what a set of rays did on the grid.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct SceneFeatures {
+    /// Non-degenerate triangles.
+    pub triangles: usize,
+    /// Rays traced.
+    pub rays: u64,
+    /// Rays that hit something.
+    pub hits: u64,
+    /// Grid cells visited, summed over the rays.
+    pub cells: u64,
+    /// Triangle tests on the grid, summed over the rays.
+    pub tests: u64,
+}
+
+impl SceneFeatures {
+    fn per_ray(&self, x: u64) -> f64 {
+        if self.rays == 0 {
+            0.0
+        } else {
+            x as f64 / self.rays as f64
+        }
+    }
+
+    /// Fraction of the rays that hit (0 without rays).
+    pub fn hit_fraction(&self) -> f64 {
+        self.per_ray(self.hits)
+    }
+
+    /// Grid cells visited per ray.
+    pub fn cells_per_ray(&self) -> f64 {
+        self.per_ray(self.cells)
+    }
+
+    /// Grid triangle tests per ray.
+    pub fn tests_per_ray(&self) -> f64 {
+        self.per_ray(self.tests)
+    }
+
+    /// `log2 N` (0 for N ≤ 1).
+    pub fn log2_triangles(&self) -> f64 {
+        math::log2_64(self.triangles.max(1) as f64)
+    }
+
+    /// Adds the work of one ray.
+    pub fn add_ray(&mut self, hit: bool, cells: u32, tests: u32) {
+        self.rays += 1;
+        self.hits += u64::from(hit);
+        self.cells += u64::from(cells);
+        self.tests += u64::from(tests);
+    }
+}
+
+/// The most terms a part has.
+pub const MAX_TERMS: usize = 3;
+
+/// One predicted cost.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Part {
+    /// Grid build: `c·N`.
+    GridBuild,
+    /// Grid time per ray: `c₀ + c₁·cells + c₂·tests` (per ray, counted on the grid).
+    GridRay,
+    /// kd-tree build: `c·N·log2 N`.
+    KdBuild,
+    /// kd-tree time per ray: `h·(c₀ + c₁·log2 N) + (1 − h)·c₂`, `h` the fraction of rays that hit.
+    KdRay,
+}
+
+impl Part {
+    /// Every part, in calibration order.
+    pub const ALL: [Part; 4] = [Part::GridBuild, Part::GridRay, Part::KdBuild, Part::KdRay];
+
+    /// Which constants of the calibration are this part's coefficients.
+    pub fn constants(self) -> Range<usize> {
+        match self {
+            Part::GridBuild => 0..1,
+            Part::GridRay => 1..4,
+            Part::KdBuild => 4..5,
+            Part::KdRay => 5..8,
+        }
+    }
+
+    /// The part's terms for a scene (unused slots are 0).
+    pub fn terms(self, f: &SceneFeatures) -> [f64; MAX_TERMS] {
+        let n = f.triangles as f64;
+        let h = f.hit_fraction();
+        match self {
+            Part::GridBuild => [n, 0.0, 0.0],
+            Part::GridRay => [1.0, f.cells_per_ray(), f.tests_per_ray()],
+            Part::KdBuild => [n * f.log2_triangles(), 0.0, 0.0],
+            Part::KdRay => [h, h * f.log2_triangles(), 1.0 - h],
+        }
+    }
+
+    /// The predicted cost in nanoseconds.
+    pub fn predict(self, calibration: &Calibration, f: &SceneFeatures) -> f64 {
+        let terms = self.terms(f);
+        self.constants()
+            .zip(terms)
+            .map(|(i, t)| calibration.value(i) * t)
+            .sum()
+    }
+}
+
+impl Calibration {
+    /// The selector's estimates for a scene (seconds).
+    pub fn estimate(&self, f: &SceneFeatures) -> CostEstimate {
+        CostEstimate {
+            grid_ray_seconds: Part::GridRay.predict(self, f) * 1e-9,
+            kd_ray_seconds: Part::KdRay.predict(self, f) * 1e-9,
+            kd_build_seconds: Part::KdBuild.predict(self, f) * 1e-9,
+        }
+    }
+}

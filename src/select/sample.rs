@@ -1,0 +1,102 @@
+//! The selector's sample rays: traced through the grid that is already built, counting the work, so
+//! that the cost model sees what rays do in this scene. Nothing is allocated.
+
+use crate::accel::grid::{GridWork, UniformGrid};
+use crate::mesh::TriMesh;
+use crate::ray::Ray;
+use crate::workload::{bounce, bounce_offset, Camera, SplitMix64};
+
+use super::model::SceneFeatures;
+
+/// Rays a caller offers as representative of its workload.
+pub trait RaySource {
+    /// How many rays there are.
+    fn ray_count(&self) -> usize;
+    /// Ray `i` (`i < ray_count()`).
+    fn ray(&self, i: usize) -> Ray;
+}
+
+impl RaySource for &[Ray] {
+    fn ray_count(&self) -> usize {
+        self.len()
+    }
+    fn ray(&self, i: usize) -> Ray {
+        self.get(i)
+            .copied()
+            .unwrap_or(Ray::new(glam::Vec3::ZERO, glam::Vec3::ZERO))
+    }
+}
+
+impl RaySource for alloc::vec::Vec<Ray> {
+    fn ray_count(&self) -> usize {
+        self.len()
+    }
+    fn ray(&self, i: usize) -> Ray {
+        self.as_slice().ray(i)
+    }
+}
+
+/// How many sample rays the library makes when the caller gives none: a `side × side` camera image
+/// of the whole scene (the view of [`Camera::looking_at`]) plus one diffuse bounce per hit — the shape
+/// of a path tracer's first two bounces.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SampleParams {
+    /// Camera image side; `side²` primary rays. 0 = no sampling (the estimates are then NaN).
+    pub camera_side: u32,
+    /// Seed of the pixel jitter and the bounce directions (the samples are deterministic).
+    pub seed: u64,
+}
+
+impl SampleParams {
+    /// 24 × 24 camera rays and their bounces (about 1 000 rays).
+    pub const DEFAULT: SampleParams = SampleParams {
+        camera_side: 24,
+        seed: 0x5a3b_1e5d,
+    };
+}
+
+impl Default for SampleParams {
+    fn default() -> Self {
+        SampleParams::DEFAULT
+    }
+}
+
+/// Traces the sample rays (the caller's, or the library's per `params`) through `grid`, counting
+/// cells, triangle tests and hits.
+pub fn sample_grid(
+    grid: &UniformGrid,
+    mesh: &TriMesh,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+) -> SceneFeatures {
+    let mut f = SceneFeatures {
+        triangles: mesh.len() - mesh.degenerate_count(),
+        ..SceneFeatures::default()
+    };
+    let trace = |ray: &Ray, f: &mut SceneFeatures| {
+        let mut work = GridWork::default();
+        let hit = grid.intersect_counted(mesh, ray, &mut work);
+        f.add_ray(hit.is_hit(), work.cells, work.tests);
+        hit
+    };
+    if let Some(source) = rays {
+        for i in 0..source.ray_count() {
+            trace(&source.ray(i), &mut f);
+        }
+        return f;
+    }
+    let side = params.camera_side as usize;
+    let camera = Camera::looking_at(&mesh.bounds(), side);
+    let offset = bounce_offset(mesh);
+    let mut rng = SplitMix64::new(params.seed);
+    for j in 0..side {
+        for i in 0..side {
+            let primary = camera.ray(i, j, &mut rng);
+            let hit = trace(&primary, &mut f);
+            if let Some(b) = bounce(mesh, &primary, &hit, offset, &mut rng) {
+                trace(&b, &mut f);
+            }
+        }
+    }
+    f
+}

@@ -1,0 +1,176 @@
+//! The selector through `Scene`: each outcome from calibrations that force it, the online switch,
+//! and that a switch never changes an answer.
+
+mod common;
+
+use common::{bundled, mesh_of, reference_hits, test_rays};
+use rayq::scene::Outcome;
+use rayq::select::calibration::Calibration;
+use rayq::{BuildError, BuildOptions, Scene, Structure};
+
+/// A calibration in which the kd-tree costs `kd_ray` ns per ray and `build` ns per N log2 N, and the
+/// grid 1 µs per ray.
+fn calibration(kd_ray: f64, build: f64) -> Calibration {
+    Calibration::new(0, [10.0, 1000.0, 0.0, 0.0, build, kd_ray, 0.0, kd_ray]).unwrap()
+}
+
+fn auto(expected_rays: u64) -> BuildOptions {
+    BuildOptions {
+        structure: Structure::Auto,
+        expected_rays,
+        ..BuildOptions::DEFAULT
+    }
+}
+
+#[test]
+fn each_outcome_of_a_known_budget() {
+    let data = bundled("teapot");
+    let fast_kd = calibration(100.0, 10.0);
+    let scene = Scene::build(&data.as_source(), &auto(1), &fast_kd).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::BelowBreakEven)
+    );
+    // W* = build / (t_grid − t_kd), in the report.
+    let n = 6320.0f64;
+    let w = 10.0 * n * n.log2() / 900.0;
+    assert!(
+        (r.break_even_rays / w - 1.0).abs() < 1e-9,
+        "{} vs {w}",
+        r.break_even_rays
+    );
+    assert!((r.grid_ray_seconds - 1e-6).abs() < 1e-15 && (r.kd_ray_seconds - 1e-7).abs() < 1e-15);
+
+    let scene = Scene::build(&data.as_source(), &auto(w.ceil() as u64), &fast_kd).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::KdTree, Outcome::AboveBreakEven)
+    );
+    assert!(r.kd_node_count > 0 && r.grid_resolution == [0; 3]);
+
+    let slow_kd = calibration(5000.0, 10.0);
+    let scene = Scene::build(&data.as_source(), &auto(u64::MAX), &slow_kd).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::GridFasterPerRay)
+    );
+    assert_eq!(r.break_even_rays, f64::INFINITY);
+
+    // Forced structures estimate nothing.
+    let forced = BuildOptions {
+        structure: Structure::Grid,
+        ..BuildOptions::DEFAULT
+    };
+    let r = Scene::build(&data.as_source(), &forced, &fast_kd)
+        .unwrap()
+        .report();
+    assert_eq!(r.outcome, Outcome::Forced);
+    assert!(r.break_even_rays.is_nan());
+}
+
+#[test]
+fn unknown_budget_switches_once_the_excess_pays_for_the_build() {
+    let data = bundled("teapot");
+    let c = calibration(100.0, 10.0);
+    let mut scene = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::OnlineOnGrid)
+    );
+    let w = r.break_even_rays;
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 12, 300, 4);
+    let want = reference_hits(&mesh, &rays);
+    let before: Vec<_> = rays.iter().map(|r| scene.intersect(r)).collect();
+
+    let below = (w * 0.9) as u64;
+    scene.update(below, 0).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::OnlineOnGrid);
+    scene.update(w as u64 - below + 1, 0).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::KdTree, Outcome::OnlineSwitched)
+    );
+    for ((ray, a), b) in rays.iter().zip(&before).zip(&want) {
+        let h = scene.intersect(ray);
+        assert!(
+            h.same_bits(a) && h.same_bits(b),
+            "{ray:?}: switch changed {a:?} to {h:?}"
+        );
+    }
+    // Further updates change nothing.
+    scene.update(1_000_000, 5).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::OnlineSwitched);
+}
+
+#[test]
+fn a_known_remaining_budget_re_decides() {
+    let data = bundled("teapot");
+    let c = calibration(100.0, 10.0);
+    let mut scene = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    let w = scene.report().break_even_rays;
+    scene.update(10, (w * 0.5) as u64).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::OnlineOnGrid);
+    scene.update(10, w.ceil() as u64).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::OnlineSwitched);
+}
+
+#[test]
+fn a_switch_that_does_not_fit_the_memory_limit_keeps_the_grid() {
+    let data = bundled("teapot");
+    let c = calibration(100.0, 10.0);
+    let unlimited = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    let held = unlimited.report().memory_bytes;
+    // The smallest limit (in steps of 1/32) that lets the grid's build through.
+    let (options, mut scene) = (0..256)
+        .map(|k| BuildOptions {
+            memory_limit: held + k * held / 32,
+            ..auto(0)
+        })
+        .find_map(|o| Scene::build(&data.as_source(), &o, &c).ok().map(|s| (o, s)))
+        .expect("some limit lets the grid through");
+    assert!(
+        options.memory_limit < 2 * held,
+        "the test needs a tight limit"
+    );
+    let err = scene.update(u64::MAX / 2, 0).unwrap_err();
+    assert!(matches!(err, BuildError::MemoryLimit { .. }), "{err:?}");
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::OnlineOnGrid)
+    );
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 8, 100, 5);
+    for (ray, want) in rays.iter().zip(reference_hits(&mesh, &rays)) {
+        assert!(scene.intersect(ray).same_bits(&want));
+    }
+}
+
+#[test]
+fn caller_sample_rays_feed_the_estimate() {
+    let data = bundled("teapot");
+    let mesh = mesh_of(&data);
+    let c = Calibration::new(0, [10.0, 1.0, 10.0, 30.0, 10.0, 50.0, 5.0, 20.0]).unwrap();
+    // Rays that all miss (pointing away from the box) cost the grid no cells or tests.
+    let away: Vec<rayq::Ray> = (0..64)
+        .map(|i| {
+            rayq::Ray::new(
+                mesh.bounds().max + glam::Vec3::splat(1.0 + i as f32),
+                glam::Vec3::ONE,
+            )
+        })
+        .collect();
+    let s = Scene::build_with_samples(&data.as_source(), &auto(0), &c, Some(&away)).unwrap();
+    assert!((s.report().grid_ray_seconds - 1e-9).abs() < 1e-18);
+    let own = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    assert!(
+        own.report().grid_ray_seconds > 1e-8,
+        "library samples hit the teapot"
+    );
+}
