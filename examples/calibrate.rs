@@ -317,15 +317,58 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
         );
         std::process::exit(1);
     }
+    // Model variants: a term stays only if it lowers the cross-validated W* error. The variant with
+    // the lowest leave-one-out median is the one written (ties go to the one listed first, which
+    // has fewer terms).
+    let mut kd_no_log = Terms::ALL;
+    kd_no_log.0[3][1] = false;
+    let mut kd_constant = Terms::ALL;
+    kd_constant.0[3] = [true, false, false];
+    let mut grid_no_cells = kd_no_log;
+    grid_no_cells.0[1][1] = false;
+    let mut grid_tests_only = kd_no_log;
+    grid_tests_only.0[1] = [false, false, true];
+    let variants = [
+        ("kd ray constant", kd_constant),
+        ("grid tests only", grid_tests_only),
+        ("grid without cells", grid_no_cells),
+        ("kd ray h, 1-h", kd_no_log),
+        ("all terms", Terms::ALL),
+    ];
+    println!("\nleave-one-out W* error (predicted from the selector's sample rays), by model:");
+    let mut best = (f64::INFINITY, variants[0]);
+    for (label, terms) in variants {
+        let errs = leave_one_out(&obs, &terms);
+        let max = errs.iter().copied().fold(0.0, f64::max);
+        let med = median(errs);
+        println!(
+            "  {label:<24} median {:>6.1} %  max {:>7.1} %",
+            100.0 * med,
+            100.0 * max
+        );
+        if med < best.0 {
+            best = (med, (label, terms));
+        }
+    }
+    let (chosen, terms) = best.1;
+    let errs = leave_one_out_by(&obs, &terms, GridCost::Clock);
+    let max = errs.iter().copied().fold(0.0, f64::max);
+    println!(
+        "  {:<24} median {:>6.1} %  max {:>7.1} %",
+        format!("{chosen}, grid by clock"),
+        100.0 * median(errs),
+        100.0 * max
+    );
+    println!("chosen: {chosen}");
+
     let all: Vec<Observation> = obs.iter().map(|o| o.1).collect();
-    let calib = match fit(&all, &Terms::ALL, 0) {
+    let calib = match fit(&all, &terms, 0) {
         Ok(c) => c,
         Err(e) => {
             eprintln!("fit failed: {e:?}");
             std::process::exit(1);
         }
     };
-
     println!("\nfitted constants (ns):");
     for (c, v) in rayq::select::calibration::CONSTANTS
         .iter()
@@ -347,45 +390,11 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
             100.0 * max
         );
     }
-
-    // Model variants: a term stays only if it lowers the cross-validated W* error.
-    let mut no_log = Terms::ALL;
-    no_log.0[3][1] = false;
-    let mut kd_constant = Terms::ALL;
-    kd_constant.0[3] = [true, false, false];
-    let mut grid_tests_only = Terms::ALL;
-    grid_tests_only.0[1] = [false, false, true];
-    let mut grid_no_cells = Terms::ALL;
-    grid_no_cells.0[1][1] = false;
-    println!("\nleave-one-out W* error (predicted from the selector's sample rays), by model:");
-    for (label, terms) in [
-        ("all terms", Terms::ALL),
-        ("kd ray without log2 N", no_log),
-        ("kd ray constant", kd_constant),
-        ("grid ray without cells", grid_no_cells),
-        ("grid ray tests only", grid_tests_only),
-    ] {
-        let errs = leave_one_out(&obs, &terms);
-        let max = errs.iter().copied().fold(0.0, f64::max);
-        println!(
-            "  {label:<24} median {:>6.1} %  max {:>7.1} %",
-            100.0 * median(errs),
-            100.0 * max
-        );
-    }
-    let errs = leave_one_out_by(&obs, &Terms::ALL, GridCost::Clock);
-    let max = errs.iter().copied().fold(0.0, f64::max);
-    println!(
-        "  {:<24} median {:>6.1} %  max {:>7.1} %",
-        "all, grid by the clock",
-        100.0 * median(errs),
-        100.0 * max
-    );
-    println!("\nper scene (all terms):");
-    for ((name, o), e) in obs.iter().zip(leave_one_out(&obs, &Terms::ALL)) {
+    println!("\nper scene ({chosen}, leave-one-out):");
+    for ((name, o), e) in obs.iter().zip(leave_one_out(&obs, &terms)) {
         let rest: Vec<Observation> = obs.iter().filter(|x| &x.0 != name).map(|x| x.1).collect();
-        let est = fit(&rest, &Terms::ALL, 0)
-            .map_or(f64::NAN, |c| c.estimate(&o.sample).break_even_rays());
+        let est =
+            fit(&rest, &terms, 0).map_or(f64::NAN, |c| c.estimate(&o.sample).break_even_rays());
         println!(
             "  {name:<18} W* meas {:>11.3e}  est {:>11.3e}  error {:>6.1} %",
             o.measured_break_even(),
