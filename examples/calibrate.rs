@@ -12,9 +12,13 @@
 use std::path::{Path, PathBuf};
 
 use rayq::mesh::MeshData;
-use rayq::select::fit::{fit, Observation, Terms};
+use rayq::select::fit::{fit, Observation};
 use rayq::select::measure::{observe, MeasureParams};
 use rayq::select::model::Part;
+use rayq::select::validate::{
+    best_variant, cross_validated_break_even, cross_validated_errors, median, relative_error,
+    GridCost, VARIANTS,
+};
 use rayq::{MemoryBudget, TriMesh};
 
 struct Args {
@@ -123,61 +127,6 @@ fn name_of(p: &Path) -> String {
         || p.display().to_string(),
         |s| s.to_string_lossy().into_owned(),
     )
-}
-
-/// `|estimate / measured − 1|`, with `∞/∞` counting as exact and one infinite side as 100 %.
-fn relative_error(est: f64, meas: f64) -> f64 {
-    match (est.is_finite(), meas.is_finite()) {
-        (false, false) => 0.0,
-        (true, true) if meas > 0.0 => (est / meas - 1.0).abs(),
-        _ => 1.0,
-    }
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    if v.is_empty() {
-        return f64::NAN;
-    }
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
-/// How the grid's per-ray time is taken from the sample rays.
-#[derive(Clone, Copy, PartialEq)]
-enum GridCost {
-    /// Counted work times the calibrated per-operation costs (what the library does).
-    Counted,
-    /// The sample rays timed by the clock.
-    Clock,
-}
-
-/// Leave-one-out: W* relative error per scene, predicting from the selector's sample rays with a
-/// calibration fitted on the other scenes.
-fn leave_one_out(obs: &[(String, Observation)], terms: &Terms) -> Vec<f64> {
-    leave_one_out_by(obs, terms, GridCost::Counted)
-}
-
-fn leave_one_out_by(obs: &[(String, Observation)], terms: &Terms, grid: GridCost) -> Vec<f64> {
-    (0..obs.len())
-        .map(|i| {
-            let rest: Vec<Observation> = obs
-                .iter()
-                .enumerate()
-                .filter(|&(j, _)| j != i)
-                .map(|(_, o)| o.1)
-                .collect();
-            match fit(&rest, terms, 0) {
-                Ok(c) => {
-                    let mut e = c.estimate(&obs[i].1.sample);
-                    if grid == GridCost::Clock {
-                        e.grid_ray_seconds = obs[i].1.sample_grid_ray_ns * 1e-9;
-                    }
-                    relative_error(e.break_even_rays(), obs[i].1.measured_break_even())
-                }
-                Err(_) => f64::NAN,
-            }
-        })
-        .collect()
 }
 
 /// One observation as a line: name, then the numbers in a fixed order.
@@ -317,51 +266,30 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
         );
         std::process::exit(1);
     }
-    // Model variants: a term stays only if it lowers the cross-validated W* error. The variant with
-    // the lowest leave-one-out median is the one written (ties go to the one listed first, which
-    // has fewer terms).
-    let mut kd_no_log = Terms::ALL;
-    kd_no_log.0[3][1] = false;
-    let mut kd_constant = Terms::ALL;
-    kd_constant.0[3] = [true, false, false];
-    let mut grid_no_cells = kd_no_log;
-    grid_no_cells.0[1][1] = false;
-    let mut grid_tests_only = kd_no_log;
-    grid_tests_only.0[1] = [false, false, true];
-    let variants = [
-        ("kd ray constant", kd_constant),
-        ("grid tests only", grid_tests_only),
-        ("grid without cells", grid_no_cells),
-        ("kd ray h, 1-h", kd_no_log),
-        ("all terms", Terms::ALL),
-    ];
+    let all: Vec<Observation> = obs.iter().map(|o| o.1).collect();
+    // Model variants: a term stays only if it lowers the cross-validated W* error; the best is the
+    // one written.
     println!("\nleave-one-out W* error (predicted from the selector's sample rays), by model:");
-    let mut best = (f64::INFINITY, variants[0]);
-    for (label, terms) in variants {
-        let errs = leave_one_out(&obs, &terms);
+    for (label, terms) in VARIANTS {
+        let mut errs = cross_validated_errors(&all, &terms, 0, GridCost::Counted);
         let max = errs.iter().copied().fold(0.0, f64::max);
-        let med = median(errs);
         println!(
             "  {label:<24} median {:>6.1} %  max {:>7.1} %",
-            100.0 * med,
+            100.0 * median(&mut errs),
             100.0 * max
         );
-        if med < best.0 {
-            best = (med, (label, terms));
-        }
     }
-    let (chosen, terms) = best.1;
-    let errs = leave_one_out_by(&obs, &terms, GridCost::Clock);
+    let (chosen, terms, _) = best_variant(&all);
+    let mut errs = cross_validated_errors(&all, &terms, 0, GridCost::Clock);
     let max = errs.iter().copied().fold(0.0, f64::max);
     println!(
         "  {:<24} median {:>6.1} %  max {:>7.1} %",
         format!("{chosen}, grid by clock"),
-        100.0 * median(errs),
+        100.0 * median(&mut errs),
         100.0 * max
     );
     println!("chosen: {chosen}");
 
-    let all: Vec<Observation> = obs.iter().map(|o| o.1).collect();
     let calib = match fit(&all, &terms, 0) {
         Ok(c) => c,
         Err(e) => {
@@ -378,7 +306,7 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
     }
     println!("\nin-sample fit, relative error per part (median / max):");
     for part in Part::ALL {
-        let errs: Vec<f64> = all
+        let mut errs: Vec<f64> = all
             .iter()
             .map(|o| relative_error(part.predict(&calib, &o.workload), o.measured(part)))
             .collect();
@@ -386,20 +314,18 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
         println!(
             "  {:<10} {:>6.1} % / {:>6.1} %",
             format!("{part:?}"),
-            100.0 * median(errs),
+            100.0 * median(&mut errs),
             100.0 * max
         );
     }
     println!("\nper scene ({chosen}, leave-one-out):");
-    for ((name, o), e) in obs.iter().zip(leave_one_out(&obs, &terms)) {
-        let rest: Vec<Observation> = obs.iter().filter(|x| &x.0 != name).map(|x| x.1).collect();
-        let est =
-            fit(&rest, &terms, 0).map_or(f64::NAN, |c| c.estimate(&o.sample).break_even_rays());
+    let est = cross_validated_break_even(&all, &terms, 0, GridCost::Counted);
+    for ((name, o), est) in obs.iter().zip(est) {
         println!(
             "  {name:<18} W* meas {:>11.3e}  est {:>11.3e}  error {:>6.1} %",
             o.measured_break_even(),
             est,
-            100.0 * e
+            100.0 * relative_error(est, o.measured_break_even())
         );
     }
 

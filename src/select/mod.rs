@@ -8,3 +8,4 @@ pub mod fit;
 pub mod measure;
 pub mod model;
 pub mod sample;
+pub mod validate;
