@@ -227,7 +227,12 @@ impl Scene {
         let mut estimate = None;
         let mut online = None;
         if let (Structure::Auto, Accel::Grid(grid)) = (options.structure, &accel) {
-            let features = sample_grid(grid, &mesh, samples, &options.samples);
+            let features = sample_grid(
+                grid,
+                &mesh,
+                samples,
+                &options.samples.for_budget(options.expected_rays),
+            );
             let e = calibration.estimate(&features);
             estimate = Some(e);
             if options.expected_rays == 0 {

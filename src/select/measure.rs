@@ -81,8 +81,19 @@ fn thread_cpu_seconds() -> Option<f64> {
     None
 }
 
-/// The median of `repeats` timings of `f`, in nanoseconds, and the last result.
-pub fn median_ns<T>(repeats: u32, mut f: impl FnMut() -> T) -> (f64, T) {
+/// A timing over repeats: median, fastest and slowest, nanoseconds.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Timing {
+    /// Median.
+    pub median: f64,
+    /// Fastest repeat.
+    pub min: f64,
+    /// Slowest repeat.
+    pub max: f64,
+}
+
+/// `repeats` timings of `f` (at least one), and the last result.
+pub fn time_ns<T>(repeats: u32, mut f: impl FnMut() -> T) -> (Timing, T) {
     let mut times = Vec::new();
     let mut last = None;
     for _ in 0..repeats.max(1) {
@@ -93,7 +104,31 @@ pub fn median_ns<T>(repeats: u32, mut f: impl FnMut() -> T) -> (f64, T) {
     }
     times.sort_by(f64::total_cmp);
     let r = last.expect("at least one run");
-    (times[times.len() / 2], r)
+    let timing = Timing {
+        median: times[times.len() / 2],
+        min: times[0],
+        max: times[times.len() - 1],
+    };
+    (timing, r)
+}
+
+/// The median of `repeats` timings of `f`, in nanoseconds, and the last result.
+pub fn median_ns<T>(repeats: u32, f: impl FnMut() -> T) -> (f64, T) {
+    let (t, r) = time_ns(repeats, f);
+    (t.median, r)
+}
+
+/// The spread of an observation's timings (per-ray ones per ray).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Spread {
+    /// Grid build.
+    pub grid_build: Timing,
+    /// kd-tree build.
+    pub kd_build: Timing,
+    /// Grid, per workload ray.
+    pub grid_ray: Timing,
+    /// kd-tree, per workload ray.
+    pub kd_ray: Timing,
 }
 
 /// The workload rays for `mesh`: camera rays and one diffuse bounce per hit.
@@ -120,37 +155,66 @@ fn trace(accel: &dyn RayQuery, mesh: &TriMesh, rays: &[Ray]) -> u32 {
 /// Builds both structures on `mesh`, times the builds and the workload on each, and records what the
 /// workload and the selector's sample rays did on the grid.
 pub fn observe(mesh: &TriMesh, params: &MeasureParams) -> Result<Observation, BuildError> {
-    let (grid_build_ns, grid) = median_ns(params.repeats, || {
+    observe_with_spread(mesh, params).map(|(o, _)| o)
+}
+
+/// [`observe`], also returning the spread of the repeated timings.
+pub fn observe_with_spread(
+    mesh: &TriMesh,
+    params: &MeasureParams,
+) -> Result<(Observation, Spread), BuildError> {
+    let rays = workload(mesh, params.workload_side, params.seed);
+    observe_rays(mesh, &rays, params)
+}
+
+/// [`observe_with_spread`] on the caller's workload rays.
+pub fn observe_rays(
+    mesh: &TriMesh,
+    rays: &[Ray],
+    params: &MeasureParams,
+) -> Result<(Observation, Spread), BuildError> {
+    let (grid_build, grid) = time_ns(params.repeats, || {
         UniformGrid::build(mesh, &params.grid, &mut MemoryBudget::new(0))
     });
     let grid = grid?;
-    let (kd_build_ns, tree) = median_ns(params.repeats, || {
+    let (kd_build, tree) = time_ns(params.repeats, || {
         KdTree::build(mesh, &params.kdtree, &mut MemoryBudget::new(0))
     });
     let tree = tree?;
-    let rays = workload(mesh, params.workload_side, params.seed);
     let mut work = SceneFeatures {
         triangles: mesh.len() - mesh.degenerate_count(),
         ..SceneFeatures::default()
     };
-    for r in &rays {
+    for r in rays {
         let mut w = GridWork::default();
         let h = grid.intersect_counted(mesh, r, &mut w);
         work.add_ray(h.is_hit(), w.cells, w.tests);
     }
     let n = rays.len().max(1) as f64;
-    let (grid_ns, _) = median_ns(params.repeats, || trace(&grid, mesh, &rays));
-    let (kd_ns, _) = median_ns(params.repeats, || trace(&tree, mesh, &rays));
+    let per_ray = |t: Timing| Timing {
+        median: t.median / n,
+        min: t.min / n,
+        max: t.max / n,
+    };
+    let (grid_ray, _) = time_ns(params.repeats, || trace(&grid, mesh, rays));
+    let (kd_ray, _) = time_ns(params.repeats, || trace(&tree, mesh, rays));
     let (sample_ns, sample) = median_ns(params.repeats, || {
         sample_grid(&grid, mesh, None, &params.samples)
     });
-    Ok(Observation {
+    let spread = Spread {
+        grid_build,
+        kd_build,
+        grid_ray: per_ray(grid_ray),
+        kd_ray: per_ray(kd_ray),
+    };
+    let o = Observation {
         workload: work,
         sample,
         sample_grid_ray_ns: sample_ns / sample.rays.max(1) as f64,
-        grid_build_ns,
-        kd_build_ns,
-        grid_ray_ns: grid_ns / n,
-        kd_ray_ns: kd_ns / n,
-    })
+        grid_build_ns: grid_build.median,
+        kd_build_ns: kd_build.median,
+        grid_ray_ns: spread.grid_ray.median,
+        kd_ray_ns: spread.kd_ray.median,
+    };
+    Ok((o, spread))
 }

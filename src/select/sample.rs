@@ -55,6 +55,23 @@ impl SampleParams {
     };
 }
 
+impl SampleParams {
+    /// These parameters for a known budget of `expected_rays` (0 = unknown): the library's sample
+    /// rays (about `2·side²`) are capped at 1/64 of the budget, with a floor of a 2 × 2 image, so
+    /// that sampling never costs a small budget more than about 1.5 % of its rays.
+    pub fn for_budget(&self, expected_rays: u64) -> SampleParams {
+        if expected_rays == 0 {
+            return *self;
+        }
+        let cap = (expected_rays / 128) as f64;
+        let side = (crate::math::sqrt64(cap) as u32).clamp(2, self.camera_side.max(2));
+        SampleParams {
+            camera_side: side.min(self.camera_side),
+            ..*self
+        }
+    }
+}
+
 impl Default for SampleParams {
     fn default() -> Self {
         SampleParams::DEFAULT

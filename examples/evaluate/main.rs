@@ -1,0 +1,861 @@
+//! The evaluation: reproduces the paper's experiment (Hapala, Karlík, Havran 2011) on this machine
+//! and writes `docs/evaluation.md` with its charts (SVG) into `docs/`.
+//!
+//!     cargo run --release --example evaluate                 # full scene set (~10 minutes)
+//!     cargo run --release --example evaluate -- --quick      # bundled scenes and small procedural ones
+//!     cargo run --release --example evaluate --features peers    # + Embree 3 and obvhs in the same run
+//!
+//! For every scene: both structures are built and the path-tracer-like workload (camera rays plus
+//! one diffuse bounce per hit) is traced through each, repeated, medians kept and the spread
+//! reported; the measured W* follows. The estimated W* is what the selector would say at run time
+//! (its sample rays through the grid, costed by a calibration) with the calibration fitted on the
+//! other scenes: leave-one-out, and 4-fold as in the paper. Then, per ray budget R = 10³..10⁸: the
+//! total time of grid only, kd-tree only, the selector with R known, the selector with R unknown
+//! (online switch), and the peers; the regret against the oracle (the better fixed choice knowing R).
+
+#[cfg(feature = "peers")]
+#[path = "../../benches/shared/peer_structures.rs"]
+mod peer_structures;
+mod reference;
+mod svg;
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use rayq::mesh::MeshData;
+use rayq::select::fit::Observation;
+use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
+use rayq::select::model::Part;
+use rayq::select::model::SceneFeatures;
+use rayq::select::sample::{sample_grid, SampleParams};
+use rayq::select::validate::{
+    best_variant, cross_validated_break_even, cross_validated_errors, median, relative_error,
+    GridCost, VARIANTS,
+};
+use rayq::{GridParams, MemoryBudget, Ray, TriMesh, UniformGrid};
+use svg::{Chart, Mark, Series};
+
+/// Camera sides of the selector's sample rays tried for the speed/accuracy chart.
+const SAMPLE_SIDES: [u32; 8] = [2, 4, 8, 12, 16, 24, 32, 48];
+/// Ray budgets, half decades from 10³ to 10⁸.
+fn budgets() -> Vec<f64> {
+    (0..=10).map(|k| 10f64.powf(3.0 + 0.5 * k as f64)).collect()
+}
+
+struct Args {
+    quick: bool,
+    out: PathBuf,
+}
+
+fn parse() -> Args {
+    let mut a = Args {
+        quick: false,
+        out: PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/docs")),
+    };
+    let mut it = std::env::args().skip(1);
+    while let Some(arg) = it.next() {
+        match arg.as_str() {
+            "--quick" => a.quick = true,
+            "--out" => a.out = it.next().map(PathBuf::from).unwrap_or(a.out),
+            _ => {
+                eprintln!("usage: evaluate [--quick] [--out DIR]");
+                std::process::exit(2);
+            }
+        }
+    }
+    a
+}
+
+/// A scene of the set: name, group (for the charts), mesh.
+struct SceneSpec {
+    name: String,
+    group: &'static str,
+    data: MeshData,
+}
+
+fn group_of(name: &str) -> &'static str {
+    match name {
+        n if n.contains("stadium") || n == "spd_teapot" => "stadium",
+        "bunny" | "dragon_res2" | "dragon_res3" | "horse" | "nefertiti" | "armadillo_29k" => {
+            "scanned"
+        }
+        "fandisk" | "engine_2cyl" | "rocker_arm" | "f15" | "xwing" | "teapot" => "CAD",
+        "sibenik" | "munich" | "mountain" => "architecture & terrain",
+        _ => "procedural",
+    }
+}
+
+fn scene_set(quick: bool) -> Vec<SceneSpec> {
+    let root = env!("CARGO_MANIFEST_DIR");
+    let mut files: Vec<PathBuf> = Vec::new();
+    let dirs = if quick {
+        vec![format!("{root}/scenes")]
+    } else {
+        vec![format!("{root}/../shared/scenes")]
+    };
+    for d in dirs {
+        if let Ok(rd) = std::fs::read_dir(&d) {
+            files.extend(
+                rd.filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|p| p.extension().is_some_and(|e| e == "obj")),
+            );
+        }
+    }
+    if !quick && files.is_empty() {
+        eprintln!("../shared/scenes not found; using scenes/");
+        return scene_set(true);
+    }
+    files.sort();
+    let mut v: Vec<SceneSpec> = files
+        .iter()
+        .filter_map(|p| {
+            let name = p.file_stem()?.to_string_lossy().into_owned();
+            match rayq::obj::load_obj(p) {
+                Ok(data) => Some(SceneSpec {
+                    group: group_of(&name),
+                    name,
+                    data,
+                }),
+                Err(e) => {
+                    eprintln!("skipping {}: {e}", p.display());
+                    None
+                }
+            }
+        })
+        .collect();
+    let procedural: &[(&str, usize)] = if quick {
+        &[
+            ("sphereflake", 1_000),
+            ("sphereflake", 10_000),
+            ("stadium", 10_000),
+            ("soup", 2_000),
+        ]
+    } else {
+        &[
+            ("sphereflake", 1_000),
+            ("sphereflake", 10_000),
+            ("sphereflake", 100_000),
+            ("sphereflake", 1_000_000),
+            ("stadium", 10_000),
+            ("stadium", 1_000_000),
+            ("mount", 100_000),
+            ("rings", 100_000),
+            ("gears", 10_000),
+            ("tetra", 10_000),
+            ("soup", 10_000),
+            ("slivers", 2_000),
+        ]
+    };
+    for &(name, n) in procedural {
+        if let Some(data) = rayq::procedural::by_name(name, n) {
+            let label = if n >= 1_000_000 {
+                format!("{name}-{}M", n / 1_000_000)
+            } else {
+                format!("{name}-{}k", n / 1000)
+            };
+            v.push(SceneSpec {
+                group: group_of(&label),
+                name: label,
+                data,
+            });
+        }
+    }
+    v
+}
+
+/// A peer's build and per-ray time (ns) and its hit accuracy against the f64 reference.
+struct PeerResult {
+    label: String,
+    build_ns: f64,
+    ray_ns: f64,
+    wrong: f64,
+}
+
+/// What the evaluation measured on one scene.
+struct Measured {
+    name: String,
+    group: &'static str,
+    triangles: usize,
+    obs: Observation,
+    spread: Spread,
+    /// Sample features and sampling time (ns) for each of `SAMPLE_SIDES`.
+    samples: Vec<(SceneFeatures, f64)>,
+    /// Share of reference rays on which rayq's answer is not an exact one (None: not checked).
+    rayq_wrong: Option<f64>,
+    peers: Vec<PeerResult>,
+}
+
+/// Rays the accuracy check uses: the first `n` of the workload (camera rays and bounces mixed).
+fn accuracy_rays(rays: &[Ray], n: usize) -> Vec<Ray> {
+    let step = (rays.len() / n.max(1)).max(1);
+    rays.iter().step_by(step).take(n).copied().collect()
+}
+
+/// Share of `rays` on which `prims` is not an exact answer.
+fn wrong_share(
+    mesh: &TriMesh,
+    rays: &[Ray],
+    reference: &[reference::Answer],
+    prims: &[u32],
+) -> f64 {
+    let bad = rays
+        .iter()
+        .zip(reference)
+        .zip(prims)
+        .filter(|((r, want), &p)| !reference::agrees(mesh, r, **want, p))
+        .count();
+    bad as f64 / rays.len().max(1) as f64
+}
+
+#[cfg(feature = "peers")]
+fn peers(
+    data: &MeshData,
+    mesh: &TriMesh,
+    rays: &[Ray],
+    check: Option<(&[Ray], &[reference::Answer])>,
+    repeats: u32,
+    device: Option<&peer_structures::EmbreeDevice>,
+) -> Vec<PeerResult> {
+    use peer_structures::{embree3, Kind};
+    use rayq::select::measure::median_ns;
+    let kinds = [
+        Kind::Embree(embree3::RTC_BUILD_QUALITY_LOW),
+        Kind::Embree(embree3::RTC_BUILD_QUALITY_MEDIUM),
+        Kind::Embree(embree3::RTC_BUILD_QUALITY_HIGH),
+        Kind::Obvhs("medium_build", obvhs::BvhBuildParams::medium_build()),
+    ];
+    let mut out = Vec::new();
+    for kind in kinds {
+        let (build_ns, built) = median_ns(repeats, || kind.build(data, device));
+        let Ok(built) = built else { continue };
+        let (t, _) = median_ns(repeats, || built.count_hits(rays));
+        let wrong = check.map_or(f64::NAN, |(r, want)| {
+            wrong_share(mesh, r, want, &built.prims(r))
+        });
+        out.push(PeerResult {
+            label: kind.label(),
+            build_ns,
+            ray_ns: t / rays.len().max(1) as f64,
+            wrong,
+        });
+    }
+    out
+}
+
+fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Option<Measured> {
+    let mesh = TriMesh::from_source(&spec.data.as_source(), &mut MemoryBudget::new(0)).ok()?;
+    let rays = workload(&mesh, params.workload_side, params.seed);
+    let (obs, spread) = observe_rays(&mesh, &rays, params).ok()?;
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).ok()?;
+    let samples = SAMPLE_SIDES
+        .iter()
+        .map(|&side| {
+            let p = SampleParams {
+                camera_side: side,
+                ..SampleParams::DEFAULT
+            };
+            let t = thread_seconds();
+            let f = sample_grid(&grid, &mesh, None, &p);
+            (f, (thread_seconds() - t) * 1e9)
+        })
+        .collect();
+    // Accuracy against the f64 reference (brute force, so only where it is affordable).
+    let limit = if quick { 20_000 } else { 130_000 };
+    let check_rays = accuracy_rays(&rays, if quick { 500 } else { 1500 });
+    let reference: Option<Vec<reference::Answer>> = (mesh.len() <= limit).then(|| {
+        check_rays
+            .iter()
+            .map(|r| reference::closest(&mesh, r))
+            .collect()
+    });
+    let rayq_wrong = reference.as_ref().map(|want| {
+        let prims: Vec<u32> = check_rays
+            .iter()
+            .map(|r| rayq::RayQuery::intersect(&grid, &mesh, r).prim)
+            .collect();
+        wrong_share(&mesh, &check_rays, want, &prims)
+    });
+    #[cfg(feature = "peers")]
+    let peers = {
+        thread_local! {
+            static DEVICE: Option<peer_structures::EmbreeDevice> = peer_structures::EmbreeDevice::new().ok();
+        }
+        DEVICE.with(|d| {
+            peers(
+                &spec.data,
+                &mesh,
+                &rays,
+                reference.as_ref().map(|w| (&check_rays[..], &w[..])),
+                params.repeats,
+                d.as_ref(),
+            )
+        })
+    };
+    #[cfg(not(feature = "peers"))]
+    let peers = Vec::new();
+    Some(Measured {
+        name: spec.name.clone(),
+        group: spec.group,
+        triangles: mesh.len(),
+        obs,
+        spread,
+        samples,
+        rayq_wrong,
+        peers,
+    })
+}
+
+/// Totals (seconds) of the strategies for `r` rays on a measured scene, given the selector's
+/// estimated W* (`w_est`) and sampling time (`sample_s`).
+struct Totals {
+    grid: f64,
+    kd: f64,
+    auto_known: f64,
+    auto_unknown: f64,
+    oracle: f64,
+}
+
+fn totals(o: &Observation, w_est: f64, sample_s: f64, r: f64) -> Totals {
+    let (g, b) = (o.grid_build_ns * 1e-9, o.kd_build_ns * 1e-9);
+    let (tg, tk) = (o.grid_ray_ns * 1e-9, o.kd_ray_ns * 1e-9);
+    let grid = g + r * tg;
+    let kd = b + r * tk;
+    let auto_known = g + sample_s + if r >= w_est { b + r * tk } else { r * tg };
+    let switch = w_est.ceil();
+    let auto_unknown = g
+        + sample_s
+        + if r > switch {
+            switch * tg + b + (r - switch) * tk
+        } else {
+            r * tg
+        };
+    Totals {
+        grid,
+        kd,
+        auto_known,
+        auto_unknown,
+        oracle: grid.min(kd),
+    }
+}
+
+fn fmt_w(w: f64) -> String {
+    if w.is_finite() {
+        format!("{w:.3e}")
+    } else {
+        "∞".into()
+    }
+}
+
+fn geomean(v: &[f64]) -> f64 {
+    (v.iter().map(|x| x.ln()).sum::<f64>() / v.len().max(1) as f64).exp()
+}
+
+fn main() {
+    let args = parse();
+    let mut params = MeasureParams::DEFAULT;
+    if args.quick {
+        params.workload_side = 64;
+        params.repeats = 2;
+    }
+    let specs = scene_set(args.quick);
+    println!(
+        "evaluating {} scenes{}",
+        specs.len(),
+        if args.quick { " (quick)" } else { "" }
+    );
+    let mut results: Vec<Measured> = Vec::new();
+    for (i, spec) in specs.iter().enumerate() {
+        let t = std::time::Instant::now();
+        match measure_scene(spec, &params, args.quick) {
+            Some(m) => {
+                println!(
+                    "[{:>2}/{}] {:<18} N={:>8}  grid {:>8.2} ms {:>6.0} ns/ray | kd {:>8.1} ms {:>6.0} ns/ray | W* {}  ({:.1} s)",
+                    i + 1,
+                    specs.len(),
+                    m.name,
+                    m.triangles,
+                    m.obs.grid_build_ns * 1e-6,
+                    m.obs.grid_ray_ns,
+                    m.obs.kd_build_ns * 1e-6,
+                    m.obs.kd_ray_ns,
+                    fmt_w(m.obs.measured_break_even()),
+                    t.elapsed().as_secs_f64()
+                );
+                results.push(m);
+            }
+            None => eprintln!(
+                "[{:>2}/{}] {}: could not be measured",
+                i + 1,
+                specs.len(),
+                spec.name
+            ),
+        }
+    }
+    if results.len() < 3 {
+        eprintln!("too few scenes");
+        std::process::exit(1);
+    }
+    std::fs::create_dir_all(&args.out).ok();
+    let report = analyse(&results, &args);
+    let path = args.out.join("evaluation.md");
+    std::fs::write(&path, report).expect("write docs/evaluation.md");
+    println!("wrote {}", path.display());
+}
+
+fn write_chart(args: &Args, file: &str, chart: &Chart) {
+    let p = args.out.join(file);
+    if let Err(e) = std::fs::write(&p, chart.svg()) {
+        eprintln!("cannot write {}: {e}", p.display());
+    }
+}
+
+fn analyse(results: &[Measured], args: &Args) -> String {
+    let obs: Vec<Observation> = results.iter().map(|m| m.obs).collect();
+    let (variant, terms, _) = best_variant(&obs);
+    let loo = cross_validated_break_even(&obs, &terms, 0, GridCost::Counted);
+    let kfold = cross_validated_break_even(&obs, &terms, 4, GridCost::Counted);
+    let clock = cross_validated_errors(&obs, &terms, 0, GridCost::Clock);
+    let measured: Vec<f64> = obs.iter().map(|o| o.measured_break_even()).collect();
+    let mut loo_err: Vec<f64> = loo
+        .iter()
+        .zip(&measured)
+        .map(|(e, m)| relative_error(*e, *m))
+        .collect();
+    let mut kfold_err: Vec<f64> = kfold
+        .iter()
+        .zip(&measured)
+        .map(|(e, m)| relative_error(*e, *m))
+        .collect();
+    // The selector's estimate and sampling time depend on the budget: with R known, the library
+    // caps its sample rays (SampleParams::for_budget); take the measured side at or below the one it
+    // would use. With R unknown it uses the default side.
+    let loo_by_side: Vec<Vec<f64>> = (0..SAMPLE_SIDES.len())
+        .map(|k| {
+            let with: Vec<Observation> = results
+                .iter()
+                .map(|m| Observation {
+                    sample: m.samples[k].0,
+                    ..m.obs
+                })
+                .collect();
+            cross_validated_break_even(&with, &terms, 0, GridCost::Counted)
+        })
+        .collect();
+    let side_index = |r: f64| {
+        let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
+        SAMPLE_SIDES.iter().rposition(|&s| s <= side).unwrap_or(0)
+    };
+    // (W* estimate, sampling seconds) of scene `i` for budget `r` (0 = unknown).
+    let selector = |i: usize, r: f64| {
+        let k = side_index(r);
+        (loo_by_side[k][i], results[i].samples[k].1 * 1e-9)
+    };
+    let at = |i: usize, r: f64| {
+        let (w_known, s_known) = selector(i, r);
+        let (w_unknown, s_unknown) = selector(i, 0.0);
+        let o = &results[i].obs;
+        let known = totals(o, w_known, s_known, r);
+        let unknown = totals(o, w_unknown, s_unknown, r);
+        Totals {
+            auto_unknown: unknown.auto_unknown,
+            ..known
+        }
+    };
+
+    let mut md = String::new();
+    let _ = writeln!(md, "# Evaluation\n");
+    let _ = writeln!(
+        md,
+        "Generated by `cargo run --release --example evaluate{}{}` on the project's 2-core VM \
+         (timings are thread CPU time, medians of {} repeats; the spread column gives the slowest / \
+         fastest repeat of the kd-tree build). Workload per scene: {}² camera rays plus one diffuse \
+         bounce per hit. Do not edit by hand: rerun the command.\n",
+        if args.quick { " -- --quick" } else { "" },
+        if cfg!(feature = "peers") { " --features peers" } else { "" },
+        if args.quick { 2 } else { 3 },
+        if args.quick { 64 } else { 128 }
+    );
+    let _ = writeln!(md, "## Summary\n");
+    let mut regrets = Vec::new();
+    let mut worst = (1.0f64, String::new());
+    let mut worst_unknown = (1.0f64, String::new());
+    let mut right = 0usize;
+    let mut decisions = 0usize;
+    for (i, m) in results.iter().enumerate() {
+        for r in budgets() {
+            let t = at(i, r);
+            let q = t.auto_known / t.oracle;
+            regrets.push(q);
+            decisions += 1;
+            right += usize::from((r >= selector(i, r).0) == (t.kd < t.grid));
+            if q > worst.0 {
+                worst = (q, format!("{} at R = {r:.0e}", m.name));
+            }
+            let u = t.auto_unknown / t.oracle;
+            if u > worst_unknown.0 {
+                worst_unknown = (u, format!("{} at R = {r:.0e}", m.name));
+            }
+        }
+    }
+    let _ = writeln!(md, "| measure | value | goal |\n|---|---:|---:|");
+    let _ = writeln!(
+        md,
+        "| median \\|W*est / W*meas − 1\\|, leave-one-out | {:.1} % | ≤ 10 % |",
+        100.0 * median(&mut loo_err)
+    );
+    let _ = writeln!(
+        md,
+        "| the same, 4-fold | {:.1} % | |",
+        100.0 * median(&mut kfold_err)
+    );
+    let _ = writeln!(
+        md,
+        "| the same with the grid's sample rays timed by the clock | {:.1} % | |",
+        100.0 * median(&mut clock.clone())
+    );
+    let _ = writeln!(md, "| regret (AUTO / oracle), geometric mean over scenes × budgets 10³..10⁸ | {:.3} | ≤ 1.05 |", geomean(&regrets));
+    let _ = writeln!(
+        md,
+        "| regret, worst ({}) | {:.3} | ≤ 1.5 |",
+        worst.1, worst.0
+    );
+    let _ = writeln!(
+        md,
+        "| unknown budget (online switch), worst ({}) | {:.3} | ≤ 2 |",
+        worst_unknown.1, worst_unknown.0
+    );
+    let _ = writeln!(
+        md,
+        "| decisions that match the oracle | {right} of {decisions} | |"
+    );
+    let _ = writeln!(
+        md,
+        "| model variant (lowest leave-one-out error) | {variant} | |\n"
+    );
+
+    // Per-scene table.
+    let _ = writeln!(md, "## Per scene\n");
+    let _ = writeln!(
+        md,
+        "Times: builds in ms, per ray in ns (medians; kd build spread = slowest/fastest). W* est is \
+         leave-one-out. Lost: AUTO's total time over the oracle's at R = 10⁴ / 10⁶ / 10⁸ rays.\n"
+    );
+    let _ = writeln!(md, "| scene | group | N | grid build | kd build (spread) | grid/ray | kd/ray | W* meas | W* est | ratio | lost 10⁴ / 10⁶ / 10⁸ |");
+    let _ = writeln!(md, "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---|");
+    for (i, (m, &w_est)) in results.iter().zip(&loo).enumerate() {
+        let o = &m.obs;
+        let w = o.measured_break_even();
+        let lost: Vec<String> = [1e4, 1e6, 1e8]
+            .iter()
+            .map(|&r| {
+                let t = at(i, r);
+                format!("{:+.0} %", 100.0 * (t.auto_known / t.oracle - 1.0))
+            })
+            .collect();
+        let ratio = if w.is_finite() && w_est.is_finite() && w > 0.0 {
+            format!("{:.2}", w_est / w)
+        } else if w.is_infinite() && w_est.is_infinite() {
+            "∞/∞".into()
+        } else {
+            "—".into()
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.2} | {:.1} ({:.2}) | {:.0} | {:.0} | {} | {} | {} | {} |",
+            m.name,
+            m.group,
+            m.triangles,
+            o.grid_build_ns * 1e-6,
+            o.kd_build_ns * 1e-6,
+            m.spread.kd_build.max / m.spread.kd_build.min.max(1.0),
+            o.grid_ray_ns,
+            o.kd_ray_ns,
+            fmt_w(w),
+            fmt_w(w_est),
+            ratio,
+            lost.join(" / ")
+        );
+    }
+
+    // Charts.
+    let _ = writeln!(md, "\n## Charts\n");
+    let groups = [
+        "scanned",
+        "CAD",
+        "architecture & terrain",
+        "stadium",
+        "procedural",
+    ];
+    for g in groups {
+        let Some((i, m)) = results
+            .iter()
+            .enumerate()
+            .filter(|(_, m)| m.group == g)
+            .max_by_key(|(_, m)| m.triangles)
+        else {
+            continue;
+        };
+        let b = budgets();
+        let curve = |label: &str, mark: Mark, f: &dyn Fn(f64) -> f64| Series {
+            label: label.to_string(),
+            points: b.iter().map(|&r| (r, f(r))).collect(),
+            mark,
+        };
+        let mut series = vec![
+            curve("grid only", Mark::Line, &|r| at(i, r).grid),
+            curve("kd-tree only", Mark::Line, &|r| at(i, r).kd),
+            curve("AUTO, R known", Mark::Dashed, &|r| at(i, r).auto_known),
+            curve("AUTO, R unknown", Mark::Dashed, &|r| at(i, r).auto_unknown),
+        ];
+        for p in &m.peers {
+            series.push(curve(&p.label, Mark::Line, &|r| {
+                (p.build_ns + r * p.ray_ns) * 1e-9
+            }));
+        }
+        let file = format!(
+            "evaluation_total_{}.svg",
+            g.split(' ').next().unwrap_or(g).to_lowercase()
+        );
+        write_chart(
+            args,
+            &file,
+            &Chart {
+                title: format!(
+                    "{} ({}, {} triangles): build + rays",
+                    m.name, g, m.triangles
+                ),
+                x_label: "rays traced R".into(),
+                y_label: "total seconds".into(),
+                log_x: true,
+                log_y: true,
+                series,
+            },
+        );
+        let _ = writeln!(md, "![total time, {g}]({file})\n");
+    }
+    let finite: Vec<(f64, f64)> = measured
+        .iter()
+        .zip(&loo)
+        .filter(|(m, e)| m.is_finite() && e.is_finite() && **m > 0.0 && **e > 0.0)
+        .map(|(m, e)| (*m, *e))
+        .collect();
+    let lo = finite
+        .iter()
+        .map(|p| p.0.min(p.1))
+        .fold(f64::INFINITY, f64::min);
+    let hi = finite.iter().map(|p| p.0.max(p.1)).fold(0.0, f64::max);
+    write_chart(
+        args,
+        "evaluation_wstar.svg",
+        &Chart {
+            title: "W*: estimated (leave-one-out) vs measured".into(),
+            x_label: "measured W* (rays)".into(),
+            y_label: "estimated W* (rays)".into(),
+            log_x: true,
+            log_y: true,
+            series: vec![
+                Series {
+                    label: "scenes".into(),
+                    points: finite.clone(),
+                    mark: Mark::Dots,
+                },
+                Series {
+                    label: "exact".into(),
+                    points: vec![(lo, lo), (hi, hi)],
+                    mark: Mark::Dashed,
+                },
+            ],
+        },
+    );
+    let _ = writeln!(
+        md,
+        "![estimated vs measured W*](evaluation_wstar.svg)\n\n{} of {} scenes have a finite measured and \
+         estimated W*; the others are the kd-tree never paying (measured, estimated, or both).\n",
+        finite.len(),
+        results.len()
+    );
+
+    // Speed vs accuracy: sample rays vs W* error and overhead.
+    let mut err_pts = Vec::new();
+    let mut over_pts = Vec::new();
+    let _ = writeln!(md, "### Sample rays: accuracy against overhead\n");
+    let _ = writeln!(md, "| camera side | sample rays (median) | leave-one-out W* error | overhead at R = W* (median) |\n|---:|---:|---:|---:|");
+    for (k, side) in SAMPLE_SIDES.iter().enumerate() {
+        let with: Vec<Observation> = results
+            .iter()
+            .map(|m| Observation {
+                sample: m.samples[k].0,
+                ..m.obs
+            })
+            .collect();
+        let mut e = cross_validated_errors(&with, &terms, 0, GridCost::Counted);
+        let mut rays: Vec<f64> = results.iter().map(|m| m.samples[k].0.rays as f64).collect();
+        let mut over: Vec<f64> = results
+            .iter()
+            .filter_map(|m| {
+                let w = m.obs.measured_break_even();
+                w.is_finite()
+                    .then(|| m.samples[k].1 / (m.obs.grid_build_ns + w * m.obs.grid_ray_ns))
+            })
+            .collect();
+        let (me, mr, mo) = (median(&mut e), median(&mut rays), median(&mut over));
+        err_pts.push((mr, 100.0 * me));
+        over_pts.push((mr, 100.0 * mo));
+        let _ = writeln!(
+            md,
+            "| {side} | {mr:.0} | {:.1} % | {:.3} % |",
+            100.0 * me,
+            100.0 * mo
+        );
+    }
+    write_chart(
+        args,
+        "evaluation_samples.svg",
+        &Chart {
+            title: "Sample rays: W* error and selection overhead".into(),
+            x_label: "sample rays per scene (median)".into(),
+            y_label: "percent".into(),
+            log_x: true,
+            log_y: true,
+            series: vec![
+                Series {
+                    label: "W* error (LOO)".into(),
+                    points: err_pts,
+                    mark: Mark::Line,
+                },
+                Series {
+                    label: "overhead at R = W*".into(),
+                    points: over_pts,
+                    mark: Mark::Line,
+                },
+            ],
+        },
+    );
+    let _ = writeln!(
+        md,
+        "\n![sample rays against error and overhead](evaluation_samples.svg)\n"
+    );
+
+    // Model terms vs cross-validated error.
+    let _ = writeln!(
+        md,
+        "### Model terms\n\n| variant | terms | leave-one-out W* error |\n|---|---:|---:|"
+    );
+    let mut term_pts = Vec::new();
+    for (label, t) in VARIANTS {
+        let n_terms: usize = Part::ALL
+            .iter()
+            .zip(t.0)
+            .map(|(p, mask)| {
+                mask.iter()
+                    .take(p.constants().len())
+                    .filter(|&&b| b)
+                    .count()
+            })
+            .sum();
+        let mut e = cross_validated_errors(&obs, &t, 0, GridCost::Counted);
+        let me = median(&mut e);
+        term_pts.push((n_terms as f64, 100.0 * me));
+        let _ = writeln!(md, "| {label} | {n_terms} | {:.1} % |", 100.0 * me);
+    }
+    write_chart(
+        args,
+        "evaluation_terms.svg",
+        &Chart {
+            title: "Model terms vs cross-validated W* error".into(),
+            x_label: "terms in the model".into(),
+            y_label: "median W* error (%)".into(),
+            log_x: false,
+            log_y: false,
+            series: vec![Series {
+                label: "variants".into(),
+                points: term_pts,
+                mark: Mark::Dots,
+            }],
+        },
+    );
+    let _ = writeln!(md, "\n![model terms against error](evaluation_terms.svg)\n");
+
+    // Rays/s vs hit accuracy.
+    let mut acc: Vec<(String, Vec<f64>, Vec<f64>)> = vec![
+        ("rayq grid".into(), vec![], vec![]),
+        ("rayq kd-tree".into(), vec![], vec![]),
+    ];
+    for m in results {
+        if let Some(w) = m.rayq_wrong {
+            acc[0].1.push(1e3 / m.obs.grid_ray_ns);
+            acc[0].2.push(w);
+            acc[1].1.push(1e3 / m.obs.kd_ray_ns);
+            acc[1].2.push(w);
+        }
+        for p in &m.peers {
+            if p.wrong.is_finite() {
+                let i = match acc.iter().position(|a| a.0 == p.label) {
+                    Some(i) => i,
+                    None => {
+                        acc.push((p.label.clone(), vec![], vec![]));
+                        acc.len() - 1
+                    }
+                };
+                acc[i].1.push(1e3 / p.ray_ns);
+                acc[i].2.push(p.wrong);
+            }
+        }
+    }
+    let _ = writeln!(md, "### Speed against hit accuracy\n\nRays whose answer is not an exact one by an f64 brute-force reference (a miss where it hits, a hit where it misses, or a triangle not at its nearest t), on scenes up to 130k triangles; rays/s over all scenes measured (median).\n\n| structure | Mrays/s (median) | wrong answers (mean) |\n|---|---:|---:|");
+    let mut speed_series = Vec::new();
+    for (label, speed, wrong) in &mut acc {
+        if speed.is_empty() {
+            continue;
+        }
+        let mean_wrong = wrong.iter().sum::<f64>() / wrong.len() as f64;
+        let ms = median(speed);
+        let _ = writeln!(md, "| {label} | {ms:.2} | {:.4} % |", 100.0 * mean_wrong);
+        speed_series.push(Series {
+            label: label.clone(),
+            points: vec![(100.0 * mean_wrong.max(1e-4), ms)],
+            mark: Mark::Dots,
+        });
+    }
+    write_chart(
+        args,
+        "evaluation_accuracy.svg",
+        &Chart {
+            title: "Rays/s against wrong answers (f64 reference)".into(),
+            x_label: "wrong answers (%, mean over scenes; 1e-4 = none seen)".into(),
+            y_label: "Mrays/s (median over scenes)".into(),
+            log_x: true,
+            log_y: true,
+            series: speed_series,
+        },
+    );
+    let _ = writeln!(md, "\n![speed against accuracy](evaluation_accuracy.svg)\n");
+
+    // Peers: where AUTO has the lowest total.
+    if results.iter().any(|m| !m.peers.is_empty()) {
+        let _ = writeln!(md, "## AUTO against the peers\n\nAUTO's total time (known budget) over the best peer's build + trace, per budget.\n");
+        let _ = writeln!(
+            md,
+            "| scene | 10³ | 10⁴ | 10⁵ | 10⁶ | 10⁷ | 10⁸ |\n|---|---:|---:|---:|---:|---:|---:|"
+        );
+        for (i, m) in results.iter().enumerate() {
+            if m.peers.is_empty() {
+                continue;
+            }
+            let cells: Vec<String> = (3..=8)
+                .map(|e| {
+                    let r = 10f64.powi(e);
+                    let auto = at(i, r).auto_known;
+                    let best = m
+                        .peers
+                        .iter()
+                        .map(|p| (p.build_ns + r * p.ray_ns) * 1e-9)
+                        .fold(f64::INFINITY, f64::min);
+                    format!("{:.2}", auto / best)
+                })
+                .collect();
+            let _ = writeln!(md, "| {} | {} |", m.name, cells.join(" | "));
+        }
+    }
+    md
+}
