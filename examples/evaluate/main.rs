@@ -23,16 +23,17 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use rayq::mesh::MeshData;
+use rayq::select::decision::kd_tree_confirmed;
 use rayq::select::fit::Observation;
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
-use rayq::select::sample::{sample_grid, SampleParams};
+use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
 use rayq::select::validate::{
     best_variant, cross_validated_break_even, cross_validated_errors, median, relative_error,
     GridCost, VARIANTS,
 };
-use rayq::{GridParams, MemoryBudget, Ray, TriMesh, UniformGrid};
+use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, Ray, TriMesh, UniformGrid};
 use svg::{Chart, Mark, Series};
 
 /// Camera sides of the selector's sample rays tried for the speed/accuracy chart.
@@ -180,6 +181,8 @@ struct Measured {
     spread: Spread,
     /// Sample features and sampling time (ns) for each of `SAMPLE_SIDES`.
     samples: Vec<(SceneFeatures, f64)>,
+    /// The same sample rays through the kd-tree (for the selector's check after building it).
+    kd_samples: Vec<(SceneFeatures, f64)>,
     /// Share of reference rays on which rayq's answer is not an exact one (None: not checked).
     rayq_wrong: Option<f64>,
     peers: Vec<PeerResult>,
@@ -247,18 +250,23 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     let rays = workload(&mesh, params.workload_side, params.seed);
     let (obs, spread) = observe_rays(&mesh, &rays, params).ok()?;
     let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).ok()?;
-    let samples = SAMPLE_SIDES
-        .iter()
-        .map(|&side| {
-            let p = SampleParams {
-                camera_side: side,
-                ..SampleParams::DEFAULT
-            };
-            let t = thread_seconds();
-            let f = sample_grid(&grid, &mesh, None, &p);
-            (f, (thread_seconds() - t) * 1e9)
-        })
-        .collect();
+    let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).ok()?;
+    let timed = |f: &dyn Fn(&SampleParams) -> SceneFeatures| -> Vec<(SceneFeatures, f64)> {
+        SAMPLE_SIDES
+            .iter()
+            .map(|&side| {
+                let p = SampleParams {
+                    camera_side: side,
+                    ..SampleParams::DEFAULT
+                };
+                let t = thread_seconds();
+                let features = f(&p);
+                (features, (thread_seconds() - t) * 1e9)
+            })
+            .collect()
+    };
+    let samples = timed(&|p| sample_grid(&grid, &mesh, None, p));
+    let kd_samples = timed(&|p| sample_kdtree(&tree, &mesh, None, p));
     // Accuracy against the f64 reference (brute force, so only where it is affordable).
     let limit = if quick { 20_000 } else { 130_000 };
     let check_rays = accuracy_rays(&rays, if quick { 500 } else { 1500 });
@@ -300,13 +308,13 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
         obs,
         spread,
         samples,
+        kd_samples,
         rayq_wrong,
         peers,
     })
 }
 
-/// Totals (seconds) of the strategies for `r` rays on a measured scene, given the selector's
-/// estimated W* (`w_est`) and sampling time (`sample_s`).
+/// Totals (seconds) of the strategies for `r` rays on a measured scene.
 struct Totals {
     grid: f64,
     kd: f64,
@@ -315,17 +323,46 @@ struct Totals {
     oracle: f64,
 }
 
-fn totals(o: &Observation, w_est: f64, sample_s: f64, r: f64) -> Totals {
+/// What the selector sees and pays on a scene for one budget: its W* estimate, the time of its
+/// sample rays on the grid, whether the kd-tree passes the check after it is built, and the time of
+/// the sample rays on the kd-tree (the check's cost).
+#[derive(Clone, Copy)]
+struct Selector {
+    w_est: f64,
+    sample_s: f64,
+    confirmed: bool,
+    check_s: f64,
+}
+
+/// The total of choosing the kd-tree after `first` rays on the grid: its build, the check, and the
+/// rest of the rays on whichever structure the check leaves.
+fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64) -> f64 {
+    let (b, tg, tk) = (
+        o.kd_build_ns * 1e-9,
+        o.grid_ray_ns * 1e-9,
+        o.kd_ray_ns * 1e-9,
+    );
+    let rest = if s.confirmed { tk } else { tg };
+    first * tg + b + s.check_s + (r - first) * rest
+}
+
+fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64) -> Totals {
     let (g, b) = (o.grid_build_ns * 1e-9, o.kd_build_ns * 1e-9);
     let (tg, tk) = (o.grid_ray_ns * 1e-9, o.kd_ray_ns * 1e-9);
     let grid = g + r * tg;
     let kd = b + r * tk;
-    let auto_known = g + sample_s + if r >= w_est { b + r * tk } else { r * tg };
-    let switch = w_est.ceil();
+    let auto_known = g
+        + known.sample_s
+        + if r >= known.w_est {
+            after_switch(o, known, 0.0, r)
+        } else {
+            r * tg
+        };
+    let switch = unknown.w_est.ceil();
     let auto_unknown = g
-        + sample_s
+        + unknown.sample_s
         + if r > switch {
-            switch * tg + b + (r - switch) * tk
+            after_switch(o, unknown, switch, r)
         } else {
             r * tg
         };
@@ -445,22 +482,22 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
         SAMPLE_SIDES.iter().rposition(|&s| s <= side).unwrap_or(0)
     };
-    // (W* estimate, sampling seconds) of scene `i` for budget `r` (0 = unknown).
+    // What the selector sees on scene `i` for budget `r` (0 = unknown).
     let selector = |i: usize, r: f64| {
         let k = side_index(r);
-        (loo_by_side[k][i], results[i].samples[k].1 * 1e-9)
-    };
-    let at = |i: usize, r: f64| {
-        let (w_known, s_known) = selector(i, r);
-        let (w_unknown, s_unknown) = selector(i, 0.0);
-        let o = &results[i].obs;
-        let known = totals(o, w_known, s_known, r);
-        let unknown = totals(o, w_unknown, s_unknown, r);
-        Totals {
-            auto_unknown: unknown.auto_unknown,
-            ..known
+        let m = &results[i];
+        Selector {
+            w_est: loo_by_side[k][i],
+            sample_s: m.samples[k].1 * 1e-9,
+            confirmed: kd_tree_confirmed(
+                rayq::Calibration::builtin(),
+                &m.samples[k].0,
+                &m.kd_samples[k].0,
+            ),
+            check_s: m.kd_samples[k].1 * 1e-9,
         }
     };
+    let at = |i: usize, r: f64| totals(&results[i].obs, &selector(i, r), &selector(i, 0.0), r);
 
     let mut md = String::new();
     let _ = writeln!(md, "# Evaluation\n");
@@ -487,7 +524,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             let q = t.auto_known / t.oracle;
             regrets.push(q);
             decisions += 1;
-            right += usize::from((r >= selector(i, r).0) == (t.kd < t.grid));
+            let sel = selector(i, r);
+            right += usize::from((r >= sel.w_est && sel.confirmed) == (t.kd < t.grid));
             if q > worst.0 {
                 worst = (q, format!("{} at R = {r:.0e}", m.name));
             }
@@ -830,6 +868,79 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         },
     );
     let _ = writeln!(md, "\n![speed against accuracy](evaluation_accuracy.svg)\n");
+
+    // Peers: build and per-ray times side by side, and the kd-tree's ratios to Embree MEDIUM.
+    if results.iter().any(|m| !m.peers.is_empty()) {
+        let labels: Vec<String> = results
+            .iter()
+            .flat_map(|m| m.peers.iter().map(|p| p.label.clone()))
+            .fold(Vec::new(), |mut v, l| {
+                if !v.contains(&l) {
+                    v.push(l);
+                }
+                v
+            });
+        let _ = writeln!(
+            md,
+            "## Peers, per scene\n\nBuild ms / ns per ray on the same workload rays (one thread). \
+             kd/Embree: the kd-tree's throughput as a fraction of Embree MEDIUM's (`rtcIntersect1`), \
+             and its build time as a multiple of Embree MEDIUM's.\n"
+        );
+        let _ = write!(md, "| scene | rayq grid | rayq kd-tree |");
+        for l in &labels {
+            let _ = write!(md, " {l} |");
+        }
+        let _ = writeln!(md, " kd/Embree rays | kd/Embree build |");
+        let _ = writeln!(
+            md,
+            "|---|---:|---:|{}---:|---:|",
+            "---:|".repeat(labels.len())
+        );
+        let mut ray_ratios = Vec::new();
+        let mut build_ratios = Vec::new();
+        for m in results {
+            let o = &m.obs;
+            let _ = write!(
+                md,
+                "| {} | {:.2} / {:.0} | {:.1} / {:.0} |",
+                m.name,
+                o.grid_build_ns * 1e-6,
+                o.grid_ray_ns,
+                o.kd_build_ns * 1e-6,
+                o.kd_ray_ns
+            );
+            for l in &labels {
+                match m.peers.iter().find(|p| &p.label == l) {
+                    Some(p) => {
+                        let _ = write!(md, " {:.2} / {:.0} |", p.build_ns * 1e-6, p.ray_ns);
+                    }
+                    None => md.push_str(" — |"),
+                }
+            }
+            match m.peers.iter().find(|p| p.label == "Embree MEDIUM") {
+                Some(p) => {
+                    let (rr, br) = (p.ray_ns / o.kd_ray_ns, o.kd_build_ns / p.build_ns);
+                    ray_ratios.push(rr);
+                    build_ratios.push(br);
+                    let _ = writeln!(md, " {rr:.2} | {br:.1}× |");
+                }
+                None => md.push_str(" — | — |\n"),
+            }
+        }
+        if !ray_ratios.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nkd-tree throughput / Embree MEDIUM: median {:.2} (range {:.2}–{:.2}); kd-tree build / \
+                 Embree MEDIUM build: median {:.1}× (range {:.1}–{:.1}×).\n",
+                median(&mut ray_ratios.clone()),
+                ray_ratios.iter().copied().fold(f64::INFINITY, f64::min),
+                ray_ratios.iter().copied().fold(0.0, f64::max),
+                median(&mut build_ratios.clone()),
+                build_ratios.iter().copied().fold(f64::INFINITY, f64::min),
+                build_ratios.iter().copied().fold(0.0, f64::max)
+            );
+        }
+    }
 
     // Peers: where AUTO has the lowest total.
     if results.iter().any(|m| !m.peers.is_empty()) {

@@ -2,6 +2,9 @@
 //! unknown one. Pure arithmetic on cost estimates; where the estimates come from is the cost model's
 //! business.
 
+use super::calibration::Calibration;
+use super::model::SceneFeatures;
+
 /// Cost estimates, in seconds, for one scene whose grid is already built.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CostEstimate {
@@ -72,6 +75,23 @@ impl CostEstimate {
             Decision::BelowBreakEven
         }
     }
+}
+
+/// The check after a kd-tree was built on an estimate: keep it only if its counted work on the
+/// sample rays costs less than the grid's did on the same rays (`grid` and `kd` from
+/// [`crate::select::sample::sample_grid`] and [`crate::select::sample::sample_kdtree`]), both priced
+/// with the calibration's grid constants: a triangle test is the same function in both structures,
+/// and a node visit costs about what a cell step does. Where the kd-tree does not save work (long
+/// slivers it cannot separate, soups of overlapping triangles), it is slower per ray whatever the
+/// estimate said, and the grid stays. No kd samples confirm nothing to the contrary.
+pub fn kd_tree_confirmed(
+    calibration: &Calibration,
+    grid: &SceneFeatures,
+    kd: &SceneFeatures,
+) -> bool {
+    let (cell, test) = (calibration.value(2), calibration.value(3));
+    let cost = |f: &SceneFeatures| cell * f.cells_per_ray() + test * f.tests_per_ray();
+    kd.rays == 0 || cost(kd) < cost(grid)
 }
 
 /// The unknown-budget rule: stay on the grid and switch once the excess already paid on the grid,

@@ -2,8 +2,9 @@
 //! that the cost model sees what rays do in this scene. Nothing is allocated.
 
 use crate::accel::grid::{GridWork, UniformGrid};
+use crate::accel::kdtree::{KdTree, KdWork};
 use crate::mesh::TriMesh;
-use crate::ray::Ray;
+use crate::ray::{Hit, Ray};
 use crate::workload::{bounce, bounce_offset, Camera, SplitMix64};
 
 use super::model::SceneFeatures;
@@ -86,19 +87,47 @@ pub fn sample_grid(
     rays: Option<&dyn RaySource>,
     params: &SampleParams,
 ) -> SceneFeatures {
+    sample_with(mesh, rays, params, |ray| {
+        let mut work = GridWork::default();
+        let hit = grid.intersect_counted(mesh, ray, &mut work);
+        (hit, work.cells, work.tests)
+    })
+}
+
+/// The same sample rays as [`sample_grid`] (the kd-tree's hits are the grid's, so the bounces are
+/// the same too) through `tree`: `cells` counts the nodes visited.
+pub fn sample_kdtree(
+    tree: &KdTree,
+    mesh: &TriMesh,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+) -> SceneFeatures {
+    sample_with(mesh, rays, params, |ray| {
+        let mut work = KdWork::default();
+        let hit = tree.intersect_counted(mesh, ray, &mut work);
+        (hit, work.nodes, work.tests)
+    })
+}
+
+/// Runs `trace` (hit, steps, tests) on every sample ray and adds up the work.
+fn sample_with(
+    mesh: &TriMesh,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+    trace: impl Fn(&Ray) -> (Hit, u32, u32),
+) -> SceneFeatures {
     let mut f = SceneFeatures {
         triangles: mesh.len() - mesh.degenerate_count(),
         ..SceneFeatures::default()
     };
-    let trace = |ray: &Ray, f: &mut SceneFeatures| {
-        let mut work = GridWork::default();
-        let hit = grid.intersect_counted(mesh, ray, &mut work);
-        f.add_ray(hit.is_hit(), work.cells, work.tests);
+    let run = |ray: &Ray, f: &mut SceneFeatures| {
+        let (hit, steps, tests) = trace(ray);
+        f.add_ray(hit.is_hit(), steps, tests);
         hit
     };
     if let Some(source) = rays {
         for i in 0..source.ray_count() {
-            trace(&source.ray(i), &mut f);
+            run(&source.ray(i), &mut f);
         }
         return f;
     }
@@ -109,9 +138,9 @@ pub fn sample_grid(
     for j in 0..side {
         for i in 0..side {
             let primary = camera.ray(i, j, &mut rng);
-            let hit = trace(&primary, &mut f);
+            let hit = run(&primary, &mut f);
             if let Some(b) = bounce(mesh, &primary, &hit, offset, &mut rng) {
-                trace(&b, &mut f);
+                run(&b, &mut f);
             }
         }
     }
