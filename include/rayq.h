@@ -124,6 +124,27 @@ typedef struct rq_obj rq_obj;
 // An immutable scene (opaque). Free with `rq_scene_free`.
 typedef struct rq_scene rq_scene;
 
+// Allocation callback: `size` bytes (never 0) aligned to `align` (a power of two), or NULL when
+// there is no memory. A NULL return is never fatal: the call that needed the memory fails with
+// `RQ_STATUS_OUT_OF_MEMORY` and frees what it took.
+typedef void *(*rq_alloc_fn)(void *user, size_t size, size_t align);
+
+// Free callback: gives back a block from `alloc` with the same `size` and `align` it was asked for.
+typedef void (*rq_free_fn)(void *user, void *ptr, size_t size, size_t align);
+
+// The program's allocator for a `bare-rt` build. The callbacks may be called from any thread that
+// calls rayq, and must be thread-safe if rayq is used from several threads.
+typedef struct rq_allocator {
+  // `sizeof(rq_allocator)` as the caller knows it; must cover `free`.
+  uint32_t struct_size;
+  // Passed to both callbacks.
+  void *user;
+  // Allocates; must not be NULL.
+  rq_alloc_fn alloc;
+  // Frees; must not be NULL.
+  rq_free_fn free;
+} rq_allocator;
+
 // An indexed triangle mesh in the caller's memory. The build copies what it needs.
 typedef struct rq_mesh_desc {
   // Vertex data: xyz (three floats) at the start of each `vertex_stride`-byte record. Need not be
@@ -139,6 +160,10 @@ typedef struct rq_mesh_desc {
   size_t triangle_count;
 } rq_mesh_desc;
 
+// Panic hook: told a NUL-terminated message (valid during the call only). It may log; it must not
+// call rayq. When it returns, the library calls `abort()`.
+typedef void (*rq_panic_hook_fn)(void *user, const char *message);
+
 // A ray `org + t*dir`, `tmin <= t <= tmax` (32 bytes). `dir` need not be normalized.
 typedef struct rq_ray {
   // Origin.
@@ -153,6 +178,10 @@ typedef struct rq_ray {
 
 // Error callback: told the status and a NUL-terminated message that lives only during the call.
 typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
+
+// Memory monitor: told the bytes a build would hold after the allocation it is about to make;
+// returns true to allow it, false to cancel the build.
+typedef bool (*rq_memory_monitor_fn)(void *user, size_t bytes_about_to_be_held);
 
 // Build options. Fill with `rq_build_options_init`, then change what you need. The library reads
 // only the fields that `struct_size` covers, so a program built against an older header keeps working.
@@ -173,6 +202,14 @@ typedef struct rq_build_options {
   rq_error_fn on_error;
   // Passed to `on_error`.
   void *user;
+  // Asked before each allocation of a build (`rq_scene_build` in every mode, and the switch in
+  // `rq_scene_update`), told the bytes the build would then hold in total; returning false refuses
+  // the allocation and the call fails with `RQ_STATUS_CANCELLED`, freeing everything it took. Runs
+  // on the calling thread; must not call rayq. NULL = no monitor. Kept by the scene for
+  // `rq_scene_update`, so it and its user pointer must stay valid as long as the scene.
+  rq_memory_monitor_fn memory_monitor;
+  // Passed to `memory_monitor`.
+  void *memory_monitor_user;
 } rq_build_options;
 
 // A hit (16 bytes). Miss: `t = +INFINITY, u = v = 0, prim = RQ_INVALID_ID`.
@@ -232,6 +269,18 @@ uint32_t rq_abi_version(void);
 
 // The library version as a static NUL-terminated string, e.g. "rayq 0.1.0".
 const char *rq_version_string(void);
+
+// Installs the program's allocator. Only in `bare-rt` builds, only once, and only before any other
+// rayq call has allocated (memory from the default `malloc` must never reach the program's `free`):
+// a second call, or a call after an allocation, is `RQ_STATUS_INVALID_OPERATION`. NULL `allocator`,
+// `alloc` or `free` is `RQ_STATUS_NULL_ARGUMENT`; a `struct_size` that does not cover `free` is
+// `RQ_STATUS_INVALID_ARGUMENT` (neither counts as the one call). Every other build returns
+// `RQ_STATUS_UNSUPPORTED` and changes nothing: there the program owns the global allocator.
+//
+// # Safety
+// `allocator` is NULL or readable for its `struct_size`; the callbacks stay callable with `user`
+// for the rest of the program, and never unwind.
+rq_status rq_set_allocator(const struct rq_allocator *allocator);
 
 // Reads a calibration blob (format in the README). Every check (magic, version, length, CRC-32,
 // each value finite and in range) passes before `*out` is written; each failure has its own status.
@@ -293,8 +342,17 @@ rq_status rq_obj_bounds(const struct rq_obj *obj, float *lo, float *hi);
 void rq_obj_free(struct rq_obj *obj);
 #endif
 
+// Sets (or, with NULL, clears) the hook a `bare-rt` build calls if rayq ever panics, just before it
+// aborts. Call it at start-up. Builds without `bare-rt` return `RQ_STATUS_UNSUPPORTED` and keep
+// nothing: there a panic is caught at the boundary and the call returns its failure value
+// (`RQ_STATUS_PANIC`, `false`, NULL).
+//
+// # Safety
+// `hook`, when not NULL, is callable with `user` from any thread for the rest of the program.
+rq_status rq_set_panic_hook(rq_panic_hook_fn hook, void *user);
+
 // Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-// no error callback. Does nothing when `opts` is NULL.
+// no error callback, no memory monitor. Does nothing when `opts` is NULL.
 //
 // # Safety
 // `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
@@ -305,7 +363,8 @@ void rq_build_options_init(struct rq_build_options *opts);
 // (if set) is told why.
 //
 // # Safety
-// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read.
+// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read. A
+// `memory_monitor` and its user pointer stay valid for as long as the scene lives.
 rq_status rq_scene_build(const struct rq_mesh_desc *mesh,
                          const struct rq_build_options *opts,
                          const struct rq_calibration *calib,
@@ -351,12 +410,15 @@ rq_status rq_scene_report_get(const struct rq_scene *scene, struct rq_scene_repo
 // budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
 // estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
 // estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
-// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT) or memory runs out, the scene
-// stays on the grid, unchanged and usable.
+// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
+// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
+// unchanged and usable.
 //
 // # Safety
 // `scene` is NULL or a live handle not being queried by another thread.
-rq_status rq_scene_update(struct rq_scene *scene, uint64_t rays_traced, uint64_t rays_remaining);
+rq_status rq_scene_update(struct rq_scene *scene,
+                          uint64_t rays_traced,
+                          uint64_t rays_remaining);
 
 #ifdef __cplusplus
 }  // extern "C"

@@ -1,19 +1,64 @@
-//! Fallible allocation with a memory limit: every byte a build holds is counted here.
+//! Fallible allocation with a memory limit and a memory monitor: every byte a build holds is counted
+//! here, and asked for here before the allocator sees the request.
 
 use alloc::vec::Vec;
+use core::ffi::c_void;
 
 use crate::error::BuildError;
+
+/// A caller's callback that is told, before each allocation of a build, how many bytes the build would
+/// hold once the allocation is made, and that may refuse it (the build then fails with
+/// [`BuildError::Cancelled`] and frees what it took). It is a C function pointer plus an opaque
+/// pointer so that the C API can pass the caller's callback straight through.
+///
+/// Guarantees: [`MemoryMonitor::allows`] calls the callback exactly once per charge, with the
+/// pointer given to [`MemoryMonitor::new`], on the thread that runs the build or
+/// [`crate::Scene::update`].
+#[derive(Clone, Copy, Debug)]
+pub struct MemoryMonitor {
+    callback: unsafe extern "C" fn(user: *mut c_void, bytes: usize) -> bool,
+    user: *mut c_void,
+}
+
+// SAFETY: the pointer is only handed back to the caller's callback, and `MemoryMonitor::new`'s
+// contract makes the caller answer for calling it from any thread that builds or updates a scene.
+unsafe impl Send for MemoryMonitor {}
+// SAFETY: as for Send; a shared MemoryMonitor is only ever read.
+unsafe impl Sync for MemoryMonitor {}
+
+impl MemoryMonitor {
+    /// A monitor that calls `callback(user, bytes)`; `true` lets the allocation go ahead.
+    ///
+    /// # Safety
+    /// `callback` must be safe to call with `user` from any thread that builds or updates a scene
+    /// holding this monitor, for as long as such a scene exists, and must not unwind.
+    pub const unsafe fn new(
+        callback: unsafe extern "C" fn(user: *mut c_void, bytes: usize) -> bool,
+        user: *mut c_void,
+    ) -> Self {
+        MemoryMonitor { callback, user }
+    }
+
+    /// Asks the callback whether the build may hold `bytes` in total.
+    pub fn allows(&self, bytes: usize) -> bool {
+        // SAFETY: `new`'s contract.
+        unsafe { (self.callback)(self.user, bytes) }
+    }
+}
 
 /// Counts the bytes a build holds and refuses growth past a limit or when the allocator fails.
 ///
 /// Guarantees: [`MemoryBudget::vec`] never aborts; it returns [`BuildError::MemoryLimit`] before
 /// asking the allocator when the limit would be passed, and [`BuildError::OutOfMemory`] when the
-/// allocator says no. `used` is the sum of the capacities (in bytes) handed out and not yet released.
+/// allocator says no. With a [`MemoryMonitor`], every charge that passes the limit is put to the
+/// monitor before the allocator is asked, and a refusal is [`BuildError::Cancelled`] (nothing taken).
+/// `used` is the sum of the capacities (in bytes) handed out and not yet released.
 #[derive(Clone, Copy, Debug, Default)]
 pub struct MemoryBudget {
     limit: usize,
     used: usize,
     peak: usize,
+    monitor: Option<MemoryMonitor>,
 }
 
 impl MemoryBudget {
@@ -23,7 +68,14 @@ impl MemoryBudget {
             limit,
             used: 0,
             peak: 0,
+            monitor: None,
         }
+    }
+
+    /// The same budget, with every later charge also put to `monitor` (None: no monitor).
+    pub const fn with_monitor(mut self, monitor: Option<MemoryMonitor>) -> Self {
+        self.monitor = monitor;
+        self
     }
 
     /// Bytes currently held.
@@ -41,7 +93,8 @@ impl MemoryBudget {
         self.limit
     }
 
-    /// Accounts for `bytes` more, or says why not.
+    /// Accounts for `bytes` more, or says why not: the limit first, then the monitor (told the total
+    /// the build would hold), so a refused charge changes nothing.
     pub fn charge(&mut self, bytes: usize, what: &'static str) -> Result<(), BuildError> {
         let needed = self
             .used
@@ -53,6 +106,11 @@ impl MemoryBudget {
                 needed,
                 limit: self.limit,
             });
+        }
+        if let Some(m) = &self.monitor {
+            if !m.allows(needed) {
+                return Err(BuildError::Cancelled { what, held: needed });
+            }
         }
         self.used = needed;
         self.peak = self.peak.max(needed);

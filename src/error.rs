@@ -74,6 +74,13 @@ pub enum BuildError {
         /// Which option.
         what: &'static str,
     },
+    /// The caller's memory monitor refused an allocation.
+    Cancelled {
+        /// What was being allocated.
+        what: &'static str,
+        /// Bytes the build would have held.
+        held: usize,
+    },
 }
 
 impl From<MeshError> for BuildError {
@@ -152,6 +159,10 @@ impl fmt::Display for BuildError {
             BuildError::CapacityExceeded { what } => write!(f, "{what} exceeds 32-bit offsets"),
             BuildError::Unsupported { what } => write!(f, "{what} is not supported by this build"),
             BuildError::InvalidArgument { what } => write!(f, "invalid argument: {what}"),
+            BuildError::Cancelled { what, held } => write!(
+                f,
+                "cancelled by the memory monitor: {what} would bring the build to {held} bytes"
+            ),
         }
     }
 }

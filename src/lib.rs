@@ -14,6 +14,11 @@
 #[cfg(not(any(feature = "std", feature = "libm")))]
 compile_error!("rayq needs float math: enable feature `std` (default) or feature `libm`");
 
+#[cfg(all(feature = "bare-rt", feature = "std"))]
+compile_error!(
+    "feature `bare-rt` brings its own panic handler and allocator: build it with --no-default-features"
+);
+
 extern crate alloc;
 #[cfg(feature = "std")]
 extern crate std;

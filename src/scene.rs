@@ -3,7 +3,7 @@
 use crate::accel::grid::{GridParams, UniformGrid};
 use crate::accel::kdtree::{KdTree, KdTreeParams};
 use crate::accel::RayQuery;
-use crate::budget::MemoryBudget;
+use crate::budget::{MemoryBudget, MemoryMonitor};
 use crate::error::BuildError;
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
@@ -54,6 +54,9 @@ pub struct BuildOptions {
     pub kdtree: KdTreeParams,
     /// The sample rays the selector makes when the caller gives none (`Auto` only).
     pub samples: SampleParams,
+    /// Told the bytes the build would hold before each allocation of a build (including the one in
+    /// [`Scene::update`]); a refusal fails it with [`BuildError::Cancelled`]. Default none.
+    pub memory_monitor: Option<MemoryMonitor>,
 }
 
 impl BuildOptions {
@@ -65,6 +68,7 @@ impl BuildOptions {
         grid: GridParams::DEFAULT,
         kdtree: KdTreeParams::DEFAULT,
         samples: SampleParams::DEFAULT,
+        memory_monitor: None,
     };
 }
 
@@ -210,7 +214,8 @@ impl Scene {
         calibration: &Calibration,
         samples: Option<&dyn RaySource>,
     ) -> Result<Scene, BuildError> {
-        let mut budget = MemoryBudget::new(options.memory_limit);
+        let mut budget =
+            MemoryBudget::new(options.memory_limit).with_monitor(options.memory_monitor);
         let mesh = TriMesh::from_source(src, &mut budget)?;
         let first = match options.structure {
             Structure::KdTree => Structure::KdTree,
@@ -325,7 +330,8 @@ impl Scene {
         if !switch {
             return Ok(());
         }
-        let mut budget = MemoryBudget::new(self.options.memory_limit);
+        let mut budget =
+            MemoryBudget::new(self.options.memory_limit).with_monitor(self.options.memory_monitor);
         budget.charge(
             self.mesh.memory_bytes() + self.accel.memory_bytes(),
             "the scene's mesh and grid",

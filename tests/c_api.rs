@@ -8,6 +8,7 @@
 //! `RAYQ_C_NO_SANITIZERS=1` turns the sanitizers off (for compilers or machines where they misbehave).
 
 use std::collections::BTreeSet;
+use std::ffi::OsStr;
 use std::fs;
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -30,12 +31,16 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 /// The programs in `c_tests/` that are linked and run, each by its own `#[test]` below.
 const RUN_TESTS: &[&str] = &[
     "calibration",
+    "embedded",
     "hostile_mesh",
     "lifecycle",
+    "memory_monitor",
     "obj",
+    "plugin",
     "precision",
     "queries",
     "report",
+    "stack_use",
     "threads",
 ];
 
@@ -70,22 +75,31 @@ fn library() -> &'static Path {
 }
 
 fn build_library() -> Result<PathBuf, String> {
-    // A target directory of its own: the outer `cargo test` may still hold the lock on the main one.
-    // CARGO_TARGET_TMPDIR is `<target dir>/tmp`, so this honours a custom CARGO_TARGET_DIR.
+    build_crate(
+        "c-api",
+        &["--crate-type", "staticlib", "--features", "capi,obj"],
+        "debug",
+        if TARGET.contains("msvc") {
+            "rayq.lib"
+        } else {
+            "librayq.a"
+        },
+    )
+}
+
+/// Runs `cargo rustc --lib <args> --target TARGET` into `<target dir>/<dir>` and returns the path of
+/// `<profile>/<file>` there. Each kind of library has a target directory of its own: the outer
+/// `cargo test` may still hold the lock on the main one, and one directory per crate type keeps each
+/// build's fingerprint from invalidating the others'. CARGO_TARGET_TMPDIR is `<target dir>/tmp`, so
+/// this honours a custom CARGO_TARGET_DIR.
+fn build_crate(dir: &str, args: &[&str], profile: &str, file: &str) -> Result<PathBuf, String> {
     let tmp = Path::new(env!("CARGO_TARGET_TMPDIR"));
-    let target_dir = tmp.parent().unwrap_or(tmp).join("c-api");
+    let target_dir = tmp.parent().unwrap_or(tmp).join(dir);
     let mut cmd = Command::new(env!("CARGO"));
     cmd.current_dir(root())
-        .args([
-            "rustc",
-            "--lib",
-            "--crate-type",
-            "staticlib",
-            "--features",
-            "capi,obj",
-            "--target",
-            TARGET,
-        ])
+        .args(["rustc", "--lib"])
+        .args(args)
+        .args(["--target", TARGET])
         .arg("--target-dir")
         .arg(&target_dir);
     let started = Instant::now();
@@ -94,17 +108,12 @@ fn build_library() -> Result<PathBuf, String> {
         .map_err(|e| format!("cannot run {cmd:?}: {e}"))?;
     if !out.status.success() {
         return Err(format!(
-            "building the static library failed ({}):\n{cmd:?}\n{}",
+            "building the library failed ({}):\n{cmd:?}\n{}",
             out.status,
             String::from_utf8_lossy(&out.stderr)
         ));
     }
-    let name = if TARGET.contains("msvc") {
-        "rayq.lib"
-    } else {
-        "librayq.a"
-    };
-    let lib = target_dir.join(TARGET).join("debug").join(name);
+    let lib = target_dir.join(TARGET).join(profile).join(file);
     if !lib.is_file() {
         return Err(format!(
             "cargo succeeded but {} does not exist",
@@ -112,7 +121,7 @@ fn build_library() -> Result<PathBuf, String> {
         ));
     }
     eprintln!(
-        "c_api: static library ready in {:.1} s: {}",
+        "c_api: library ready in {:.1} s: {}",
         started.elapsed().as_secs_f64(),
         lib.display()
     );
@@ -250,12 +259,30 @@ fn run_with_timeout(cmd: &mut Command, dir: &Path, label: &str) -> Result<Ran, S
 /// Compiles and links `source` (strict C99, sanitizers when available) into `dir`, or panics with the
 /// compiler's output.
 fn build_program(dir: &Path, name: &str, source: &Path, defines: &[&str]) -> PathBuf {
+    let mut link: Vec<&OsStr> = vec![library().as_os_str()];
+    link.extend(native_libs().iter().map(OsStr::new));
+    build_program_with(
+        dir,
+        name,
+        source,
+        &[&["-g"], sanitizer_flags(), defines].concat(),
+        &link,
+    )
+}
+
+/// Compiles `source` as strict C99 with `flags` and links it with `link` (libraries, linker flags),
+/// or panics with the compiler's output.
+fn build_program_with(
+    dir: &Path,
+    name: &str,
+    source: &Path,
+    flags: &[&str],
+    link: &[&OsStr],
+) -> PathBuf {
     let exe = dir.join(exe_name(name));
     let mut cmd = compiler(false);
     cmd.args(STRICT_C99)
-        .arg("-g")
-        .args(sanitizer_flags())
-        .args(defines)
+        .args(flags)
         .arg("-I")
         .arg(root().join("include"))
         .arg("-I")
@@ -263,8 +290,7 @@ fn build_program(dir: &Path, name: &str, source: &Path, defines: &[&str]) -> Pat
         .arg(source)
         .arg("-o")
         .arg(&exe)
-        .arg(library())
-        .args(native_libs());
+        .args(link);
     let ran = run_with_timeout(&mut cmd, dir, "compile").unwrap_or_else(|e| panic!("{e}"));
     assert!(
         ran.success,
@@ -294,7 +320,11 @@ fn run_c_test_with(name: &str, flags: &[&str]) {
     let mut all = vec!["-DRQ_WITH_OBJ"];
     all.extend_from_slice(flags);
     let exe = build_program(&dir, name, &source, &all);
-    let ran = run_program(&exe, &dir, &[]);
+    check_c_test_run(name, &run_program(&exe, &dir, &[]));
+}
+
+/// Fails unless a C test exited 0 and printed its summary line with zero failures.
+fn check_c_test_run(name: &str, ran: &Ran) {
     assert!(
         ran.success,
         "{}",
@@ -328,6 +358,11 @@ fn c_hostile_mesh() {
 #[test]
 fn c_lifecycle() {
     run_c_test("lifecycle");
+}
+
+#[test]
+fn c_memory_monitor() {
+    run_c_test("memory_monitor");
 }
 
 #[test]
@@ -576,4 +611,336 @@ fn example_render() {
         "{}",
         ran.describe("render accepted a missing scene")
     );
+}
+
+// ---- embedded and plugin builds (docs/embedded.md) ---------------------------------------------
+
+/// The bare-metal archive: no std, libm math, panics abort through the C hook, the allocator hooks.
+/// Built once per test process with the documented command.
+fn bare_library() -> &'static Path {
+    static LIB: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    let built = LIB.get_or_init(|| {
+        build_crate(
+            "c-api-bare",
+            &[
+                "--profile",
+                "bare",
+                "--crate-type",
+                "staticlib",
+                "--no-default-features",
+                "--features",
+                "bare-rt",
+            ],
+            "bare",
+            "librayq.a",
+        )
+    });
+    match built {
+        Ok(path) => path,
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// The plugin: the shared library with the C ABI (debug profile; the symbol policy is the same).
+fn plugin_library() -> &'static Path {
+    static LIB: OnceLock<Result<PathBuf, String>> = OnceLock::new();
+    let built = LIB.get_or_init(|| {
+        build_crate(
+            "c-api-plugin",
+            &["--crate-type", "cdylib", "--features", "capi"],
+            "debug",
+            "librayq.so",
+        )
+    });
+    match built {
+        Ok(path) => path,
+        Err(e) => panic!("{e}"),
+    }
+}
+
+/// One symbol as `nm -P` prints it: the archive member (empty for a plain file), name, type letter.
+struct Symbol {
+    member: String,
+    name: String,
+    kind: char,
+}
+
+/// `nm -P` with `args` on `file`, one [`Symbol`] per line.
+fn nm_symbols(args: &[&str], file: &Path) -> Vec<Symbol> {
+    let out = Command::new("nm")
+        .args(args)
+        .arg("-P")
+        .arg(file)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run nm: {e}"));
+    assert!(
+        out.status.success(),
+        "nm {args:?} {} failed: {}",
+        file.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|line| {
+            // "[archive[member]: ]name type [value size]" (the prefix with -A).
+            let (member, rest) = match line.split_once("]: ") {
+                Some((file, rest)) => (file.rsplit_once('[').map_or("", |(_, m)| m), rest),
+                None => ("", line),
+            };
+            let mut fields = rest.split_whitespace();
+            let name = fields.next()?;
+            let kind = fields.next()?.chars().next()?;
+            Some(Symbol {
+                member: member.to_owned(),
+                name: name.to_owned(),
+                kind,
+            })
+        })
+        .collect()
+}
+
+/// What the bare archive may take from the C library; anything else it needs undefined means a
+/// dependency firmware may not have. Update this list only for a reason written in
+/// docs/embedded.md.
+const BARE_LIBC: &[&str] = &[
+    "abort",
+    "free",
+    "malloc",
+    "posix_memalign",
+    "memcpy",
+    "memmove",
+    "memset",
+    "memcmp",
+    "bcmp",
+];
+
+/// True for a symbol of Rust's std, an unwinder, threads or files.
+fn std_only(name: &str) -> bool {
+    // Mangled std paths: legacy `_ZN3std..`, v0 `..C3std..` / `.._3std..` (crate root `std`).
+    let std_path = ["_ZN3std", "C3std", "_3std"]
+        .iter()
+        .any(|p| name.contains(p));
+    let runtime = [
+        "_Unwind_",
+        "__gcc_personality",
+        "rust_eh_personality",
+        "pthread_",
+        "__cxa_",
+        "__tls_get_addr",
+        "open",
+        "fopen",
+        "write",
+        "read",
+        "dlsym",
+    ]
+    .iter()
+    .any(|p| name == *p || (p.ends_with('_') && name.starts_with(p)));
+    std_path || runtime
+}
+
+/// The one std-only name the prebuilt `compiler_builtins` of a stable toolchain mentions: it was
+/// compiled with unwind tables, so some of its members (f128 and libm-style math rayq does not use)
+/// point at the personality routine. A link pulls a member in only for a symbol it defines and
+/// nothing else does, and `embedded_minimal_fits_its_size_budget` links without any unwinder;
+/// `-Z build-std` on nightly removes even these (docs/embedded.md).
+fn builtins_personality(s: &Symbol) -> bool {
+    s.member.starts_with("compiler_builtins-") && s.name.ends_with("rust_eh_personality")
+}
+
+#[test]
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+fn bare_archive_references_no_std_symbols() {
+    // The explicit target keeps binutils from handing the members (which embed LLVM bitcode) to its
+    // LLVM plugin, which cannot read a newer LLVM's bitcode and then reports "no symbols".
+    let symbols = nm_symbols(&["-A", "--target=elf64-x86-64"], bare_library());
+    assert!(
+        symbols.iter().any(|s| s.name == "rq_scene_build"),
+        "nm found no rq_scene_build in the bare archive"
+    );
+    let symbols: Vec<&Symbol> = symbols
+        .iter()
+        .filter(|s| !builtins_personality(s))
+        .collect();
+    let bad: BTreeSet<String> = symbols
+        .iter()
+        .filter(|s| std_only(&s.name))
+        .map(|s| format!("{} in {}", s.name, s.member))
+        .collect();
+    assert!(
+        bad.is_empty(),
+        "the bare archive mentions std-only symbols: {bad:?}"
+    );
+    let defined: BTreeSet<&str> = symbols
+        .iter()
+        .filter(|s| !matches!(s.kind, 'U' | 'w' | 'v'))
+        .map(|s| s.name.as_str())
+        .collect();
+    let needed: BTreeSet<&str> = symbols
+        .iter()
+        .filter(|s| s.kind == 'U' && !defined.contains(s.name.as_str()))
+        .map(|s| s.name.as_str())
+        .collect();
+    let unexpected: Vec<&&str> = needed.iter().filter(|n| !BARE_LIBC.contains(n)).collect();
+    assert!(
+        unexpected.is_empty(),
+        "the bare archive needs symbols beyond {BARE_LIBC:?}: {unexpected:?}"
+    );
+}
+
+#[test]
+#[cfg(target_os = "linux")]
+fn std_only_catches_what_it_must() {
+    // The check above passes only if this filter works: show it on names it must catch.
+    for name in [
+        "_Unwind_Resume",
+        "pthread_mutex_lock",
+        "_ZN3std2io5stdio6_print17h0123456789abcdefE",
+        "_RNvNtCs1234_3std2io5_print",
+        "open",
+    ] {
+        assert!(std_only(name), "{name} slipped through");
+    }
+    for name in ["rq_scene_build", "rust_begin_unwind", "memcpy", "readme"] {
+        assert!(!std_only(name), "{name} is not std-only");
+    }
+}
+
+#[test]
+fn c_embedded() {
+    let dir = scratch("embedded");
+    let source = root().join("c_tests/embedded.c");
+    let flags = [&["-g"], sanitizer_flags()].concat();
+    let exe = build_program_with(
+        &dir,
+        "embedded",
+        &source,
+        &flags,
+        &[bare_library().as_os_str(), OsStr::new("-lm")],
+    );
+    check_c_test_run("embedded", &run_program(&exe, &dir, &[]));
+}
+
+/// The stripped size in bytes that examples/embedded_minimal.c may reach when linked with the bare
+/// archive and nothing but the C library (x86_64 Linux, gcc 12, Rust 1.95: 235 872 bytes when
+/// recorded). To raise it on purpose: run `cargo test --test c_api embedded_minimal -- --nocapture`,
+/// note the size it prints, set this to about 5 % above it, and update docs/embedded.md.
+const MINIMAL_PROGRAM_BUDGET: u64 = 248_000;
+
+#[test]
+#[cfg(all(target_os = "linux", target_arch = "x86_64"))]
+fn embedded_minimal_fits_its_size_budget() {
+    let dir = scratch("embedded_minimal");
+    let source = root().join("examples/embedded_minimal.c");
+    let link: Vec<&OsStr> = [
+        bare_library().as_os_str(),
+        OsStr::new("-Wl,--gc-sections"),
+        OsStr::new("-s"),
+        // The C library only: no libgcc_s (unwinder), libpthread, libdl, libm.
+        OsStr::new("-nodefaultlibs"),
+        OsStr::new("-lc"),
+    ]
+    .to_vec();
+    let exe = build_program_with(
+        &dir,
+        "embedded_minimal",
+        &source,
+        &["-Os", "-ffunction-sections", "-fdata-sections"],
+        &link,
+    );
+    let ran = run_program(&exe, &dir, &[]);
+    assert!(
+        ran.success && ran.stdout.contains("embedded_minimal: hit"),
+        "{}",
+        ran.describe("examples/embedded_minimal.c failed")
+    );
+    let size = fs::metadata(&exe).expect("stat").len();
+    let archive = fs::metadata(bare_library()).expect("stat").len();
+    eprintln!("embedded_minimal: {size} bytes stripped (budget {MINIMAL_PROGRAM_BUDGET}); archive {archive} bytes");
+    assert!(
+        size <= MINIMAL_PROGRAM_BUDGET,
+        "examples/embedded_minimal.c is {size} bytes stripped, over its budget of \
+         {MINIMAL_PROGRAM_BUDGET}: find what grew, or raise MINIMAL_PROGRAM_BUDGET on purpose"
+    );
+}
+
+/// The most stack one query (closest hit or any hit, grid or kd-tree) may use, in bytes, as
+/// c_tests/stack_use.c measures it. The kd-tree's fixed traversal stack alone is 64 × 12 bytes.
+/// To change it on purpose: run `cargo test --test c_api c_stack_use -- --nocapture`, and update
+/// this and docs/embedded.md.
+const QUERY_STACK_BUDGET: usize = 4096;
+
+#[test]
+#[cfg(target_os = "linux")]
+fn c_stack_use() {
+    let dir = scratch("stack_use");
+    let source = root().join("c_tests/stack_use.c");
+    // No sanitizers: they move locals to a heap of their own and change every frame.
+    let exe = build_program_with(
+        &dir,
+        "stack_use",
+        &source,
+        &["-O2"],
+        &[
+            bare_library().as_os_str(),
+            OsStr::new("-lpthread"),
+            OsStr::new("-lm"),
+        ],
+    );
+    let ran = run_program(&exe, &dir, &[]);
+    check_c_test_run("stack_use", &ran);
+    let used: usize = ran
+        .stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("stack_use: query "))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("{}", ran.describe("no stack figure printed")));
+    assert!(
+        used <= QUERY_STACK_BUDGET,
+        "a query used {used} bytes of stack, over the budget of {QUERY_STACK_BUDGET}"
+    );
+}
+
+#[test]
+#[cfg(target_os = "linux")]
+fn plugin_exports_only_rq_symbols() {
+    let exported = nm_symbols(&["-D", "--defined-only"], plugin_library());
+    assert!(
+        exported.iter().any(|s| s.name == "rq_scene_build"),
+        "the plugin exports no rq_scene_build"
+    );
+    let foreign: Vec<&str> = exported
+        .iter()
+        .map(|s| s.name.as_str())
+        .filter(|n| !n.starts_with("rq_"))
+        .collect();
+    assert!(
+        foreign.is_empty(),
+        "the plugin exports symbols other than rq_*: {foreign:?}"
+    );
+}
+
+#[test]
+#[cfg(target_os = "linux")]
+fn c_plugin() {
+    let dir = scratch("plugin");
+    // Two files, as two plugins would ship their own copy.
+    let a = dir.join("plugin_a.so");
+    let b = dir.join("plugin_b.so");
+    fs::copy(plugin_library(), &a).expect("copy plugin a");
+    fs::copy(plugin_library(), &b).expect("copy plugin b");
+    let defines = [
+        format!("-DRQ_PLUGIN_A=\"{}\"", a.display()),
+        format!("-DRQ_PLUGIN_B=\"{}\"", b.display()),
+    ];
+    let mut flags = vec!["-g"];
+    flags.extend_from_slice(sanitizer_flags());
+    flags.extend(defines.iter().map(String::as_str));
+    let exe = build_program_with(
+        &dir,
+        "plugin",
+        &root().join("c_tests/plugin.c"),
+        &flags,
+        &[OsStr::new("-ldl")],
+    );
+    check_c_test_run("plugin", &run_program(&exe, &dir, &[]));
 }

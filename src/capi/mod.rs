@@ -3,15 +3,24 @@
 //! scene is immutable after build and may be queried from many threads; no panic crosses the boundary.
 #![allow(non_camel_case_types)]
 
+mod allocator;
+/// The `bare-rt` global allocator (declares C's malloc/free, which must stay out of the header).
+///
+/// cbindgen:ignore
+#[cfg(feature = "bare-rt")]
+mod bare_alloc;
 mod calibration;
 #[cfg(feature = "obj")]
 mod obj;
+mod panic;
 mod scene;
 mod types;
 
+pub use allocator::*;
 pub use calibration::*;
 #[cfg(feature = "obj")]
 pub use obj::*;
+pub use panic::*;
 pub use scene::*;
 pub use types::*;
 
@@ -26,6 +35,8 @@ pub const RQ_INVALID_ID: u32 = u32::MAX;
 
 /// What a function's return type gives when the body panics (std builds catch the panic).
 trait PanicValue {
+    // Without std nothing is caught, so nothing asks for the value.
+    #[cfg_attr(not(feature = "std"), allow(dead_code))]
     fn on_panic() -> Self;
 }
 
@@ -58,7 +69,8 @@ impl PanicValue for u32 {
 }
 
 /// Runs an exported body so that no panic unwinds into C: with std the panic is caught and the
-/// return type's panic value returned; without std the bare-metal panic handler is the last defence.
+/// return type's panic value returned; without std the `bare-rt` panic handler (src/capi/panic.rs)
+/// is the last defence.
 fn boundary<T: PanicValue>(body: impl FnOnce() -> T) -> T {
     #[cfg(feature = "std")]
     {
@@ -90,6 +102,7 @@ impl From<BuildError> for rq_status {
             BuildError::MemoryLimit { .. } => rq_status::RQ_STATUS_MEMORY_LIMIT,
             BuildError::Unsupported { .. } => rq_status::RQ_STATUS_UNSUPPORTED,
             BuildError::InvalidArgument { .. } => rq_status::RQ_STATUS_INVALID_ARGUMENT,
+            BuildError::Cancelled { .. } => rq_status::RQ_STATUS_CANCELLED,
         }
     }
 }

@@ -7,7 +7,7 @@ use glam::Vec3;
 
 use super::types::*;
 use super::{boundary, Message};
-use crate::budget::try_box;
+use crate::budget::{try_box, MemoryMonitor};
 use crate::error::{BuildError, MeshError};
 use crate::mesh::MeshSource;
 use crate::ray::{Hit, Ray};
@@ -16,7 +16,7 @@ use crate::select::calibration::Calibration;
 use crate::select::sample::RaySource;
 
 /// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-/// no error callback. Does nothing when `opts` is NULL.
+/// no error callback, no memory monitor. Does nothing when `opts` is NULL.
 ///
 /// # Safety
 /// `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
@@ -37,6 +37,8 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
                 memory_limit: 0,
                 on_error: None,
                 user: ptr::null_mut(),
+                memory_monitor: None,
+                memory_monitor_user: ptr::null_mut(),
             })
         }
     })
@@ -51,6 +53,7 @@ struct Options {
     sample_ray_count: usize,
     on_error: rq_error_fn,
     user: *mut core::ffi::c_void,
+    memory_monitor: Option<MemoryMonitor>,
 }
 
 /// Reads field `$field` of type `$ty` from `*$p` when `$size` covers it, else keeps `$default`.
@@ -85,6 +88,7 @@ unsafe fn read_options(
         sample_ray_count: 0,
         on_error: None,
         user: ptr::null_mut(),
+        memory_monitor: None,
     };
     if p.is_null() {
         return Ok(o);
@@ -117,6 +121,17 @@ unsafe fn read_options(
     o.memory_limit = read_covered!(p, size, memory_limit, usize, 0);
     o.sample_rays = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
     o.sample_ray_count = read_covered!(p, size, sample_ray_count, usize, 0);
+    let monitor = read_covered!(p, size, memory_monitor, rq_memory_monitor_fn, None);
+    let monitor_user = read_covered!(
+        p,
+        size,
+        memory_monitor_user,
+        *mut core::ffi::c_void,
+        ptr::null_mut()
+    );
+    // SAFETY: rq_scene_build's contract: the callback is callable with its user pointer for as long
+    // as the scene lives, on the threads that build or update it.
+    o.memory_monitor = monitor.map(|f| unsafe { MemoryMonitor::new(f, monitor_user) });
     if o.sample_rays.is_null() && o.sample_ray_count != 0 {
         return Err((
             rq_status::RQ_STATUS_NULL_ARGUMENT,
@@ -232,7 +247,8 @@ fn report_error(o: &Options, status: rq_status, message: &Message) -> rq_status 
 /// (if set) is told why.
 ///
 /// # Safety
-/// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read.
+/// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read. A
+/// `memory_monitor` and its user pointer stay valid for as long as the scene lives.
 #[no_mangle]
 pub unsafe extern "C" fn rq_scene_build(
     mesh: *const rq_mesh_desc,
@@ -277,6 +293,7 @@ pub unsafe extern "C" fn rq_scene_build(
             structure: o.structure,
             expected_rays: o.expected_rays,
             memory_limit: o.memory_limit,
+            memory_monitor: o.memory_monitor,
             ..BuildOptions::DEFAULT
         };
         let samples = CallerRays {
@@ -498,8 +515,9 @@ pub unsafe extern "C" fn rq_scene_report_get(
 /// budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
 /// estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
 /// estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
-/// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT) or memory runs out, the scene
-/// stays on the grid, unchanged and usable.
+/// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
+/// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
+/// unchanged and usable.
 ///
 /// # Safety
 /// `scene` is NULL or a live handle not being queried by another thread.

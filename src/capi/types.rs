@@ -142,7 +142,20 @@ pub struct rq_build_options {
     pub on_error: rq_error_fn,
     /// Passed to `on_error`.
     pub user: *mut c_void,
+    /// Asked before each allocation of a build (`rq_scene_build` in every mode, and the switch in
+    /// `rq_scene_update`), told the bytes the build would then hold in total; returning false refuses
+    /// the allocation and the call fails with `RQ_STATUS_CANCELLED`, freeing everything it took. Runs
+    /// on the calling thread; must not call rayq. NULL = no monitor. Kept by the scene for
+    /// `rq_scene_update`, so it and its user pointer must stay valid as long as the scene.
+    pub memory_monitor: rq_memory_monitor_fn,
+    /// Passed to `memory_monitor`.
+    pub memory_monitor_user: *mut c_void,
 }
+
+/// Memory monitor: told the bytes a build would hold after the allocation it is about to make;
+/// returns true to allow it, false to cancel the build.
+pub type rq_memory_monitor_fn =
+    Option<unsafe extern "C" fn(user: *mut c_void, bytes_about_to_be_held: usize) -> bool>;
 
 /// What a scene reports. Set `struct_size`; the library writes only the fields it covers.
 #[repr(C)]
