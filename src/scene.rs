@@ -8,8 +8,9 @@ use crate::error::BuildError;
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
-use crate::select::decision::{CostEstimate, Decision, OnlineSwitch};
-use crate::select::sample::{sample_grid, RaySource, SampleParams};
+use crate::select::decision::{kd_tree_confirmed, CostEstimate, Decision, OnlineSwitch};
+use crate::select::model::SceneFeatures;
+use crate::select::sample::{sample_grid, sample_kdtree, RaySource, SampleParams};
 
 /// Which structure a scene should use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -177,6 +178,11 @@ pub struct Scene {
     options: BuildOptions,
     /// The unknown-budget rule while the scene is on the grid with `Auto` (None otherwise).
     online: Option<OnlineSwitch>,
+    /// What the library's sample rays did on the grid, for the check of a kd-tree built later in
+    /// [`Scene::update`] (None when the caller gave the samples: they are not kept).
+    grid_samples: Option<SceneFeatures>,
+    /// The calibration's constants the check prices work with.
+    calibration: Calibration,
 }
 
 /// The report's estimate fields: NaN where nothing was estimated.
@@ -231,13 +237,10 @@ impl Scene {
         let mut outcome = Outcome::Forced;
         let mut estimate = None;
         let mut online = None;
+        let mut grid_samples = None;
+        let sample_params = options.samples.for_budget(options.expected_rays);
         if let (Structure::Auto, Accel::Grid(grid)) = (options.structure, &accel) {
-            let features = sample_grid(
-                grid,
-                &mesh,
-                samples,
-                &options.samples.for_budget(options.expected_rays),
-            );
+            let features = sample_grid(grid, &mesh, samples, &sample_params);
             let e = calibration.estimate(&features);
             estimate = Some(e);
             if options.expected_rays == 0 {
@@ -251,6 +254,7 @@ impl Scene {
                 };
             }
             if outcome == Outcome::AboveBreakEven {
+                // The grid goes first, so the limit need hold only the mesh and the kd-tree.
                 if let Accel::Grid(g) = accel {
                     g.release(&mut budget);
                 }
@@ -261,6 +265,27 @@ impl Scene {
                         return Err(e);
                     }
                 };
+                // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the
+                // same sample rays goes, and the grid (linear, quick) is built again.
+                if let Accel::KdTree(tree) = &accel {
+                    let kd = sample_kdtree(tree, &mesh, samples, &sample_params);
+                    if !kd_tree_confirmed(calibration, &features, &kd) {
+                        if let Accel::KdTree(t) = accel {
+                            t.release(&mut budget);
+                        }
+                        outcome = Outcome::GridFasterPerRay;
+                        accel = match Accel::build(Structure::Grid, &mesh, options, &mut budget) {
+                            Ok(a) => a,
+                            Err(e) => {
+                                mesh.release(&mut budget);
+                                return Err(e);
+                            }
+                        };
+                    }
+                }
+            }
+            if samples.is_none() {
+                grid_samples = Some(features);
             }
         }
         let [grid_ray_seconds, kd_ray_seconds, kd_build_seconds, break_even_rays] =
@@ -286,6 +311,8 @@ impl Scene {
             rays_traced: 0,
             options: *options,
             online,
+            grid_samples,
+            calibration: *calibration,
         };
         scene.refresh_report();
         Ok(scene)
@@ -337,6 +364,14 @@ impl Scene {
             "the scene's mesh and grid",
         )?;
         let tree = KdTree::build(&self.mesh, &self.options.kdtree, &mut budget)?;
+        if let Some(grid) = &self.grid_samples {
+            let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
+            if !kd_tree_confirmed(&self.calibration, grid, &kd) {
+                // Not worth it after all: keep the grid and stop considering the switch.
+                self.online = None;
+                return Ok(());
+            }
+        }
         self.accel = Accel::KdTree(tree);
         self.online = None;
         self.report.outcome = Outcome::OnlineSwitched;

@@ -77,21 +77,29 @@ impl CostEstimate {
     }
 }
 
+/// What a kd-tree node visit costs relative to a grid cell step in [`kd_tree_confirmed`]: a cell step
+/// also reads the cell's reference range and touches its triangles, a node visit is a few compares
+/// on 8 bytes. On the 16 scenes measured for it (docs/design.md, "Selector") every value from 0.24
+/// to 0.84 tells the faster structure apart; 0.5 sits in the middle.
+pub const KD_NODE_PER_CELL_STEP: f64 = 0.5;
+
 /// The check after a kd-tree was built on an estimate: keep it only if its counted work on the
 /// sample rays costs less than the grid's did on the same rays (`grid` and `kd` from
 /// [`crate::select::sample::sample_grid`] and [`crate::select::sample::sample_kdtree`]), both priced
 /// with the calibration's grid constants: a triangle test is the same function in both structures,
-/// and a node visit costs about what a cell step does. Where the kd-tree does not save work (long
-/// slivers it cannot separate, soups of overlapping triangles), it is slower per ray whatever the
-/// estimate said, and the grid stays. No kd samples confirm nothing to the contrary.
+/// and a node visit costs [`KD_NODE_PER_CELL_STEP`] of a cell step. Where the kd-tree does not save
+/// work (long slivers it cannot separate, soups of overlapping triangles, scenes that are nearly
+/// empty space for the grid), it is slower per ray whatever the estimate said, and the grid stays.
+/// No kd samples confirm nothing to the contrary.
 pub fn kd_tree_confirmed(
     calibration: &Calibration,
     grid: &SceneFeatures,
     kd: &SceneFeatures,
 ) -> bool {
     let (cell, test) = (calibration.value(2), calibration.value(3));
-    let cost = |f: &SceneFeatures| cell * f.cells_per_ray() + test * f.tests_per_ray();
-    kd.rays == 0 || cost(kd) < cost(grid)
+    let grid_cost = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
+    let kd_cost = KD_NODE_PER_CELL_STEP * cell * kd.cells_per_ray() + test * kd.tests_per_ray();
+    kd.rays == 0 || kd_cost < grid_cost
 }
 
 /// The unknown-budget rule: stay on the grid and switch once the excess already paid on the grid,
