@@ -944,3 +944,66 @@ fn c_plugin() {
     );
     check_c_test_run("plugin", &run_program(&exe, &dir, &[]));
 }
+
+#[test]
+fn example_pathtrace() {
+    let teapot = root().join("scenes/teapot.obj");
+    let teapot = teapot.to_str().expect("UTF-8 path");
+    let dir = scratch("example_pathtrace");
+    let exe = build_program(
+        &dir,
+        "pathtrace",
+        &root().join("examples/pathtrace.c"),
+        &["-DRQ_WITH_OBJ"],
+    );
+    // Every way of choosing the structure traces the same hits, so writes the same image; the
+    // unknown budget reports its passes and may switch structures between them.
+    let mut images = Vec::new();
+    for mode in ["known", "unknown", "grid", "kdtree"] {
+        let out = format!("{mode}.ppm");
+        let ran = run_program(
+            &exe,
+            &dir,
+            &[teapot, &out, "48", "36", "6", "--budget", mode],
+        );
+        assert!(
+            ran.success,
+            "{}",
+            ran.describe(&format!("pathtrace --budget {mode} failed"))
+        );
+        for needle in ["report (", "outcome", "break-even W*", "rays:"] {
+            assert!(
+                ran.stdout.contains(needle),
+                "{}",
+                ran.describe(&format!(
+                    "pathtrace --budget {mode} did not print {needle:?}"
+                ))
+            );
+        }
+        let (w, h, pixels) = read_ppm(&dir.join(&out));
+        assert_eq!((w, h, pixels.len()), (48, 36, 48 * 36 * 3));
+        images.push((mode, pixels));
+    }
+    for (mode, pixels) in &images[1..] {
+        assert!(
+            pixels == &images[0].1,
+            "--budget {mode} and --budget known images differ"
+        );
+    }
+    // The picture is not blank: the teapot and the sky differ.
+    let first = &images[0].1;
+    assert!(first.chunks(3).any(|p| p != &first[..3]), "a uniform image");
+    // Bad command lines: a usage message and a non-zero exit.
+    for args in [
+        &[teapot][..],
+        &[teapot, "x.ppm", "0", "4", "1"],
+        &[teapot, "x.ppm", "8", "8", "1", "--budget", "octree"],
+    ] {
+        let ran = run_program(&exe, &dir, args);
+        assert!(
+            !ran.success && ran.stderr.contains("usage"),
+            "{}",
+            ran.describe("a bad command line was accepted")
+        );
+    }
+}
