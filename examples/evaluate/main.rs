@@ -446,6 +446,18 @@ fn write_chart(args: &Args, file: &str, chart: &Chart) {
     }
 }
 
+/// The observations with the sample features of `SAMPLE_SIDES[k]` (what the selector would see with
+/// that many sample rays).
+fn with_side(results: &[Measured], k: usize) -> Vec<Observation> {
+    results
+        .iter()
+        .map(|m| Observation {
+            sample: m.samples[k].0,
+            ..m.obs
+        })
+        .collect()
+}
+
 fn analyse(results: &[Measured], args: &Args) -> String {
     let obs: Vec<Observation> = results.iter().map(|m| m.obs).collect();
     let (variant, terms, _) = best_variant(&obs);
@@ -467,16 +479,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     // caps its sample rays (SampleParams::for_budget); take the measured side at or below the one it
     // would use. With R unknown it uses the default side.
     let loo_by_side: Vec<Vec<f64>> = (0..SAMPLE_SIDES.len())
-        .map(|k| {
-            let with: Vec<Observation> = results
-                .iter()
-                .map(|m| Observation {
-                    sample: m.samples[k].0,
-                    ..m.obs
-                })
-                .collect();
-            cross_validated_break_even(&with, &terms, 0, GridCost::Counted)
-        })
+        .map(|k| cross_validated_break_even(&with_side(results, k), &terms, 0, GridCost::Counted))
         .collect();
     let side_index = |r: f64| {
         let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
@@ -719,14 +722,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     let _ = writeln!(md, "### Sample rays: accuracy against overhead\n");
     let _ = writeln!(md, "| camera side | sample rays (median) | leave-one-out W* error | overhead at R = W* (median) |\n|---:|---:|---:|---:|");
     for (k, side) in SAMPLE_SIDES.iter().enumerate() {
-        let with: Vec<Observation> = results
-            .iter()
-            .map(|m| Observation {
-                sample: m.samples[k].0,
-                ..m.obs
-            })
-            .collect();
-        let mut e = cross_validated_errors(&with, &terms, 0, GridCost::Counted);
+        let mut e = cross_validated_errors(&with_side(results, k), &terms, 0, GridCost::Counted);
         let mut rays: Vec<f64> = results.iter().map(|m| m.samples[k].0.rays as f64).collect();
         let mut over: Vec<f64> = results
             .iter()
