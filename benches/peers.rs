@@ -1,5 +1,6 @@
 //! rayq next to its peers: the same meshes and the same rays through rayq's grid and kd-tree, Embree 3
-//! (`rtcIntersect1`, one thread, build quality LOW / MEDIUM / HIGH) and obvhs (CWBVH, single thread).
+//! (`rtcIntersect1`, one thread, build quality LOW / MEDIUM / HIGH), obvhs (CWBVH, single thread) and
+//! the `bvh` crate (binary SAH BVH, single thread).
 //!
 //!     apt-get install -y libembree-dev          # Embree 3.13 (Debian bookworm: 3.13.5)
 //!     cargo bench --features peers --bench peers
@@ -12,7 +13,8 @@
 //! Build time is "from the caller's indexed arrays to a structure that answers queries" for
 //! everyone: rayq validates and copies the mesh and builds; Embree gets a new scene, a triangle
 //! geometry whose buffers are filled from the arrays, and commits; obvhs converts the arrays to its
-//! triangles, builds, and reorders the triangles into leaf order. Embree's device is created once.
+//! triangles, builds, and reorders the triangles into leaf order; the bvh crate converts them to its
+//! shapes (one per triangle, with its box) and builds. Embree's device is created once.
 //!
 //! At the end a Markdown table of medians (build ms, primary and diffuse Mrays/s, and how many rays
 //! disagree with rayq's grid on hit/miss and on the primitive hit) is printed; docs/peers.md holds
@@ -161,6 +163,7 @@ fn bench(c: &mut Criterion) {
         Kind::Obvhs("fast_build", obvhs::BvhBuildParams::fast_build()),
         Kind::Obvhs("medium_build", obvhs::BvhBuildParams::medium_build()),
         Kind::Obvhs("slow_build", obvhs::BvhBuildParams::slow_build()),
+        Kind::Bvh,
     ];
     let mut rows: Vec<Row> = Vec::new();
     let mut thread_check = None;

@@ -1,6 +1,7 @@
 //! The peers side by side with rayq behind one interface: Embree 3 (its C API declared here, one
-//! thread, build quality LOW / MEDIUM / HIGH), obvhs (CWBVH), and rayq's own structures. Shared by
-//! `benches/peers.rs` and `examples/evaluate.rs` (feature `peers`), included with `#[path]`.
+//! thread, build quality LOW / MEDIUM / HIGH), obvhs (CWBVH), the `bvh` crate (binary SAH BVH) and
+//! rayq's own structures. Shared by `benches/peers.rs` and `examples/evaluate.rs` (feature `peers`),
+//! included with `#[path]`.
 #![allow(dead_code)]
 
 use std::ffi::CString;
@@ -330,6 +331,126 @@ impl ObvhsScene {
 }
 
 // ---------------------------------------------------------------------------------------------
+// The `bvh` crate (svenstaro): its binary SAH `Bvh::build` over one shape per triangle (one
+// triangle per leaf; single-threaded: the crate's `rayon` feature is off), traversed with its own
+// ray type by `nearest_traverse_iterator` (leaves in order of their box's entry distance, so the
+// query stops at the first leaf whose box starts beyond the closest hit so far). The triangle test
+// is a two-sided Möller–Trumbore over `[tmin, tmax]` written here: the crate's
+// `Ray::intersects_triangle` culls back faces, measures `t` along the normalised direction and
+// rejects `t <= f32::EPSILON`, none of which matches `rayq::Ray`.
+// ---------------------------------------------------------------------------------------------
+pub struct BvhTriangle {
+    v0: glam::Vec3,
+    e1: glam::Vec3,
+    e2: glam::Vec3,
+    aabb: bvh::aabb::Aabb<f32, 3>,
+    /// The triangle's index in the caller's arrays.
+    id: u32,
+    node_index: usize,
+}
+
+impl bvh::aabb::Bounded<f32, 3> for BvhTriangle {
+    fn aabb(&self) -> bvh::aabb::Aabb<f32, 3> {
+        self.aabb
+    }
+}
+
+impl bvh::bounding_hierarchy::BHShape<f32, 3> for BvhTriangle {
+    fn set_bh_node_index(&mut self, index: usize) {
+        self.node_index = index;
+    }
+
+    fn bh_node_index(&self) -> usize {
+        self.node_index
+    }
+}
+
+impl BvhTriangle {
+    /// Two-sided Möller–Trumbore: the hit's `t` when the ray crosses the closed triangle with
+    /// `tmin ≤ t ≤ tmax`.
+    #[inline]
+    fn intersect(&self, ray: &Ray) -> Option<f32> {
+        let p = ray.dir.cross(self.e2);
+        let det = self.e1.dot(p);
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        let inv_det = 1.0 / det;
+        let s = ray.org - self.v0;
+        let u = s.dot(p) * inv_det;
+        if !(0.0..=1.0).contains(&u) {
+            return None;
+        }
+        let q = s.cross(self.e1);
+        let v = ray.dir.dot(q) * inv_det;
+        if v < 0.0 || u + v > 1.0 {
+            return None;
+        }
+        let t = self.e2.dot(q) * inv_det;
+        (t >= ray.tmin && t <= ray.tmax).then_some(t)
+    }
+}
+
+pub struct BvhScene {
+    bvh: bvh::bvh::Bvh<f32, 3>,
+    tris: Vec<BvhTriangle>,
+}
+
+impl BvhScene {
+    fn build(data: &MeshData) -> BvhScene {
+        let v = |i: u32| glam::Vec3::from_array(data.vertices[i as usize]);
+        let mut tris: Vec<BvhTriangle> = data
+            .indices
+            .iter()
+            .zip(0u32..)
+            .map(|(t, id)| {
+                let (a, b, c) = (v(t[0]), v(t[1]), v(t[2]));
+                let aabb = bvh::aabb::Aabb::with_bounds(
+                    a.min(b).min(c).to_array().into(),
+                    a.max(b).max(c).to_array().into(),
+                );
+                BvhTriangle {
+                    v0: a,
+                    e1: b - a,
+                    e2: c - a,
+                    aabb,
+                    id,
+                    node_index: 0,
+                }
+            })
+            .collect();
+        let bvh = bvh::bvh::Bvh::build(&mut tris);
+        BvhScene { bvh, tris }
+    }
+
+    /// Closest hit; returns the original primitive id or `Hit::INVALID_ID`.
+    #[inline]
+    fn intersect(&self, ray: &Ray) -> u32 {
+        // The crate's ray with the caller's direction as is (`Ray::new` would normalise it), so
+        // box distances are in the same units as `tmin`/`tmax`. Its box tests start at t = 0.
+        let r = bvh::ray::Ray {
+            origin: ray.org.to_array().into(),
+            direction: ray.dir.to_array().into(),
+            inv_direction: ray.dir.recip().to_array().into(),
+        };
+        let (mut best_t, mut best) = (ray.tmax, Hit::INVALID_ID);
+        for tri in self.bvh.nearest_traverse_iterator(&r, &self.tris) {
+            match r.intersection_slice_for_aabb(&tri.aabb) {
+                Some((entry, _)) if entry > best_t => break,
+                _ => {}
+            }
+            if let Some(t) = tri.intersect(ray) {
+                if t < best_t || best == Hit::INVALID_ID {
+                    best_t = t;
+                    best = tri.id;
+                }
+            }
+        }
+        best
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // The structures side by side.
 // ---------------------------------------------------------------------------------------------
 #[derive(Clone, Copy)]
@@ -337,6 +458,7 @@ pub enum Kind {
     Rayq(Structure),
     Embree(std::ffi::c_uint),
     Obvhs(&'static str, obvhs::BvhBuildParams),
+    Bvh,
 }
 
 impl Kind {
@@ -349,6 +471,7 @@ impl Kind {
                 ["LOW", "MEDIUM", "HIGH"].get(q as usize).unwrap_or(&"?")
             ),
             Kind::Obvhs(preset, _) => format!("obvhs {preset}"),
+            Kind::Bvh => "bvh crate".into(),
         }
     }
 
@@ -368,6 +491,7 @@ impl Kind {
                 None => Err("no Embree device".into()),
             },
             Kind::Obvhs(_, params) => Ok(Built::Obvhs(ObvhsScene::build(data, params))),
+            Kind::Bvh => Ok(Built::Bvh(BvhScene::build(data))),
         }
     }
 }
@@ -378,6 +502,7 @@ pub enum Built {
     Rayq(Scene),
     Embree(EmbreeScene),
     Obvhs(ObvhsScene),
+    Bvh(BvhScene),
 }
 
 impl Built {
@@ -394,6 +519,10 @@ impl Built {
                 .iter()
                 .filter(|r| s.intersect(r) != Hit::INVALID_ID)
                 .count(),
+            Built::Bvh(s) => rays
+                .iter()
+                .filter(|r| s.intersect(r) != Hit::INVALID_ID)
+                .count(),
         }
     }
 
@@ -403,6 +532,7 @@ impl Built {
             Built::Rayq(s) => rays.iter().map(|r| s.intersect(r).prim).collect(),
             Built::Embree(s) => rays.iter().map(|r| s.intersect(r)).collect(),
             Built::Obvhs(s) => rays.iter().map(|r| s.intersect(r)).collect(),
+            Built::Bvh(s) => rays.iter().map(|r| s.intersect(r)).collect(),
         }
     }
 }

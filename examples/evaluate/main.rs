@@ -3,7 +3,7 @@
 //!
 //!     cargo run --release --example evaluate                 # full scene set (~10 minutes)
 //!     cargo run --release --example evaluate -- --quick      # bundled scenes and small procedural ones
-//!     cargo run --release --example evaluate --features peers    # + Embree 3 and obvhs in the same run
+//!     cargo run --release --example evaluate --features peers    # + Embree 3, obvhs, bvh in the same run
 //!
 //! For every scene: both structures are built and the path-tracer-like workload (camera rays plus
 //! one diffuse bounce per hit) is traced through each, repeated, medians kept and the spread
@@ -226,6 +226,7 @@ fn peers(
         Kind::Embree(embree3::RTC_BUILD_QUALITY_MEDIUM),
         Kind::Embree(embree3::RTC_BUILD_QUALITY_HIGH),
         Kind::Obvhs("medium_build", obvhs::BvhBuildParams::medium_build()),
+        Kind::Bvh,
     ];
     let mut out = Vec::new();
     for kind in kinds {
