@@ -165,11 +165,15 @@ impl UniformGrid {
             } else {
                 *record = [0, RECOMPUTE];
                 let filter = Filter::new(&geometry, tri, &fp, exact);
-                fp.for_each(&geometry, |cell, x, y, z| {
-                    if filter.overlaps(&geometry, x, y, z) {
-                        count(cell);
-                    }
-                });
+                if walks(&geometry, tri, &fp, &filter) {
+                    walk_overlapped(&geometry, tri, &fp, &filter, &mut count);
+                } else {
+                    fp.for_each(&geometry, |cell, x, y, z| {
+                        if filter.overlaps(&geometry, x, y, z) {
+                            count(cell);
+                        }
+                    });
+                }
             }
         }
         // Inclusive prefix sums: counts[c] becomes the end of cell c's list.
@@ -220,11 +224,15 @@ impl UniformGrid {
             } else {
                 let fp = Footprint::of(&geometry, tri);
                 let filter = Filter::new(&geometry, tri, &fp, exact);
-                fp.for_each(&geometry, |cell, x, y, z| {
-                    if filter.overlaps(&geometry, x, y, z) {
-                        fill(cell, prim);
-                    }
-                });
+                if walks(&geometry, tri, &fp, &filter) {
+                    walk_overlapped(&geometry, tri, &fp, &filter, &mut |cell| fill(cell, prim));
+                } else {
+                    fp.for_each(&geometry, |cell, x, y, z| {
+                        if filter.overlaps(&geometry, x, y, z) {
+                            fill(cell, prim);
+                        }
+                    });
+                }
             }
         }
         budget.free(records);
@@ -817,6 +825,250 @@ impl Filter {
     }
 }
 
+/// Footprints of more cells than this may be walked slab by slab ([`walk_footprint`]) instead of
+/// cell by cell. Below it, testing every cell costs about as much as clipping and is simpler.
+const WALK_MIN_CELLS: u32 = 64;
+
+/// Whether walking the footprint slab by slab tests clearly fewer cells than enumerating it: the
+/// footprint has more than [`WALK_MIN_CELLS`] cells and more than twice the cells the triangle is
+/// expected to overlap. That estimate, in cell units, is the sum of the triangle's areas projected
+/// onto the three axis planes (a plane crosses about that many cells) plus the footprint's side
+/// lengths (cells cut by the edges). A sliver across the box overlaps a thin line of cells out of
+/// nearly all of them and is walked; a big triangle of a flat floor fills half its footprint, and
+/// testing each cell (three dot products) costs less than clipping per row. The factor 2 was the
+/// best of 1, 2, 4, 8 in build instructions on stadium_teapot and slivers (docs/robustness.md).
+fn worth_walking(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint) -> bool {
+    let cells = fp.n[0].saturating_mul(fp.n[1]).saturating_mul(fp.n[2]);
+    if cells <= WALK_MIN_CELLS {
+        return false;
+    }
+    let [p, q, r] = tri.map(|v| (v * g.inv).to_array().map(f64::from));
+    let (e, f) = (
+        [0, 1, 2].map(|k| q[k] - p[k]),
+        [0, 1, 2].map(|k| r[k] - p[k]),
+    );
+    let cross = [
+        e[1] * f[2] - e[2] * f[1],
+        e[2] * f[0] - e[0] * f[2],
+        e[0] * f[1] - e[1] * f[0],
+    ];
+    let area = 0.5 * (cross[0].abs() + cross[1].abs() + cross[2].abs());
+    let sides = f64::from(fp.n[0]) + f64::from(fp.n[1]) + f64::from(fp.n[2]);
+    // Non-finite (cell units overflow) compares false: enumerate, which is always correct.
+    f64::from(cells) > 2.0 * (area + sides)
+}
+
+/// Whether the build finds the cells of a footprint that does not fit a mask by
+/// [`walk_overlapped`] rather than by testing each of its cells: only when the filter tests cells
+/// (an accepted-whole footprint, a column or `exact == false`, is all overlap) and the triangle
+/// overlaps the footprint sparsely ([`worth_walking`]). Either way the cells found are the same.
+#[inline(always)]
+fn walks(g: &Geometry, tri: &[Vec3; 3], fp: &Footprint, filter: &Filter) -> bool {
+    !matches!(filter, Filter::All) && worth_walking(g, tri, fp)
+}
+
+/// Calls `visit(cell)` for exactly the cells of footprint `fp` that `filter` accepts for the
+/// triangle, testing only the cells [`walk_footprint`] finds near it, so the work is
+/// proportional to the cells it overlaps, not to its bounds. Out of line and through `dyn`: the
+/// triangles it serves are few and each costs clipping, while the plain enumeration stays inlined
+/// in the build's loops (called through a function boundary, the count closure's state
+/// round-trips through memory on every cell, which cost 15 % of the stadium's build time at equal
+/// instruction counts).
+#[inline(never)]
+fn walk_overlapped(
+    g: &Geometry,
+    tri: &[Vec3; 3],
+    fp: &Footprint,
+    filter: &Filter,
+    visit: &mut dyn FnMut(usize),
+) {
+    walk_footprint(g, tri, fp, &mut |cell, x, y, z| {
+        if overlaps_out_of_line(filter, g, x, y, z) {
+            visit(cell);
+        }
+    });
+}
+
+/// [`Filter::overlaps`] as one shared copy, for the walk: the enumeration inlines the test into its
+/// loop, the walk (a few triangles, clipping per row) does not need to, and a second inlined copy
+/// costs ~3 KB of code, which small embedded programs pay for (tests/c_api.rs keeps a size budget).
+#[inline(never)]
+fn overlaps_out_of_line(filter: &Filter, g: &Geometry, x: u32, y: u32, z: u32) -> bool {
+    filter.overlaps(g, x, y, z)
+}
+
+/// A convex polygon in f64 with room for a triangle clipped by four planes (at most 7 vertices).
+#[derive(Clone, Copy)]
+struct Polygon {
+    len: usize,
+    v: [[f64; 3]; 8],
+}
+
+impl Polygon {
+    fn triangle(tri: &[Vec3; 3]) -> Polygon {
+        let mut v = [[0.0; 3]; 8];
+        for (slot, p) in v.iter_mut().zip(tri) {
+            *slot = [p.x, p.y, p.z].map(f64::from);
+        }
+        Polygon { len: 3, v }
+    }
+
+    fn vertices(&self) -> &[[f64; 3]] {
+        self.v.get(..self.len).unwrap_or(&[])
+    }
+
+    /// The part of the polygon with `lo <= p[axis] <= hi` (Sutherland–Hodgman against both planes).
+    /// Crossing points get `p[axis]` set to the plane exactly; their other coordinates are off by
+    /// f64 rounding only (~1e-16 of the coordinates), far below the slack the caller adds.
+    // One out-of-line copy: called from two places in the walk, never from a hot loop.
+    #[inline(never)]
+    fn clip(&self, axis: usize, lo: f64, hi: f64) -> Polygon {
+        self.clip_side(axis, lo, false).clip_side(axis, hi, true)
+    }
+
+    /// Keeps `p[axis] >= plane` (or `<=` when `below`).
+    fn clip_side(&self, axis: usize, plane: f64, below: bool) -> Polygon {
+        let inside = |p: &[f64; 3]| {
+            if below {
+                p[axis] <= plane
+            } else {
+                p[axis] >= plane
+            }
+        };
+        let mut out = Polygon {
+            len: 0,
+            v: [[0.0; 3]; 8],
+        };
+        let mut push = |p: [f64; 3]| {
+            // A convex polygon gains at most one vertex per plane, so 8 slots hold a triangle
+            // clipped by four planes; a full polygon would only lose vertices here, never panic.
+            if let Some(slot) = out.v.get_mut(out.len) {
+                *slot = p;
+                out.len += 1;
+            }
+        };
+        let vs = self.vertices();
+        for (i, p) in vs.iter().enumerate() {
+            let q = vs.get(i + 1).or(vs.first()).unwrap_or(p);
+            if inside(p) {
+                push(*p);
+            }
+            if inside(p) != inside(q) {
+                let t = (plane - p[axis]) / (q[axis] - p[axis]);
+                let mut x = [0.0; 3];
+                for (k, x) in x.iter_mut().enumerate() {
+                    *x = p[k] + t * (q[k] - p[k]);
+                }
+                x[axis] = plane;
+                push(x);
+            }
+        }
+        out
+    }
+
+    /// The polygon's extent along `axis` (`None` when it is empty).
+    fn range(&self, axis: usize) -> Option<(f64, f64)> {
+        let vs = self.vertices();
+        let first = vs.first()?[axis];
+        Some(vs.iter().fold((first, first), |(lo, hi), p| {
+            (lo.min(p[axis]), hi.max(p[axis]))
+        }))
+    }
+}
+
+/// Calls `test(cell, x, y, z)` for every cell of footprint `fp` whose cell, enlarged by twice the
+/// margin, the triangle meets: per slab along the footprint's thinnest axis the triangle clipped to
+/// the slab, per row of that slab (along the middle axis) the piece clipped to the row, and the
+/// cells along the thickest axis that the piece's extent there covers. The thickest axis is the one
+/// left to a range, so it needs no clipping; an axis one cell thick in the footprint is never
+/// clipped (the footprint already settles it).
+///
+/// Guarantee: a superset of the cells [`Filter`] accepts. The filter accepts a cell only when the
+/// triangle meets it enlarged by the margin (up to f64 rounding); the walk keeps every cell the
+/// triangle meets enlarged by twice the margin, and rounding in the clipping and in the cell
+/// indices (~1e-16 of the coordinates) is far below the extra margin (≥ 1/64 of a cell plus 128 f32
+/// ulps of the coordinates). Every cell it keeps is within twice the margin of the triangle, so the
+/// cells tested stay proportional to the cells overlapped.
+fn walk_footprint(
+    g: &Geometry,
+    tri: &[Vec3; 3],
+    fp: &Footprint,
+    test: &mut impl FnMut(usize, u32, u32, u32),
+) {
+    let stride = [1, g.res[0] as usize, g.res[0] as usize * g.res[1] as usize];
+    let slack = [0, 1, 2].map(|a| 2.0 * f64::from(g.margin[a]));
+    // Axes from the thinnest footprint side to the thickest (ties keep x, y, z order).
+    let mut order = [0usize, 1, 2];
+    order.sort_by_key(|&a| fp.n[a]);
+    let [outer, middle, inner] = order;
+    // Clips `poly` to cell `i`'s extent on `axis` enlarged by the slack, unless the footprint is one
+    // cell thick there.
+    let clip = |poly: &Polygon, axis: usize, i: u32| {
+        if fp.n[axis] > 1 {
+            let lo = g.min64[axis] + f64::from(i) * g.size64[axis];
+            poly.clip(axis, lo - slack[axis], lo + g.size64[axis] + slack[axis])
+        } else {
+            *poly
+        }
+    };
+    let whole = Polygon::triangle(tri);
+    let mut at = [0u32; 3];
+    for i in fp.lo[outer]..fp.lo[outer] + fp.n[outer] {
+        at[outer] = i;
+        let slab = clip(&whole, outer, i);
+        let Some((j0, j1)) = cells_covering(g, fp, middle, slab.range(middle), slack[middle])
+        else {
+            continue;
+        };
+        for j in j0..=j1 {
+            at[middle] = j;
+            let row = clip(&slab, middle, j);
+            let Some((k0, k1)) = cells_covering(g, fp, inner, row.range(inner), slack[inner])
+            else {
+                continue;
+            };
+            for k in k0..=k1 {
+                at[inner] = k;
+                let cell = (0..3).fold(0, |c, a| c + at[a] as usize * stride[a]);
+                test(cell, at[0], at[1], at[2]);
+            }
+        }
+    }
+}
+
+/// The footprint's cells on `axis` whose extent, enlarged by `slack`, meets `range`, rounded
+/// outward; `None` when there are none or `range` is `None` (an empty polygon).
+fn cells_covering(
+    g: &Geometry,
+    fp: &Footprint,
+    axis: usize,
+    range: Option<(f64, f64)>,
+    slack: f64,
+) -> Option<(u32, u32)> {
+    let (lo, hi) = range?;
+    let (first, last) = (fp.lo[axis], fp.lo[axis] + fp.n[axis] - 1);
+    if fp.n[axis] <= 1 {
+        return Some((first, last));
+    }
+    // The cell index of `v`: truncation equals `floor` for non-negative values, and a negative
+    // one (or NaN) is below the footprint either way, where the clamp puts it. Multiplying by the
+    // inverse instead of dividing, and truncating instead of calling `floor` (a libm call on
+    // targets without a rounding instruction), keeps the walk as fast as the enumeration it
+    // replaces; their rounding is far below the slack.
+    let inv = 1.0 / g.size64[axis];
+    let index = |v: f64| {
+        let f = (v - g.min64[axis]) * inv;
+        if f >= 0.0 {
+            f as i64
+        } else {
+            0
+        }
+    };
+    let a = index(lo - slack).max(i64::from(first));
+    let b = index(hi + slack).min(i64::from(last));
+    (a <= b).then_some((a as u32, b as u32))
+}
+
 /// Which cells of footprint `fp` (at most 3 per axis) the triangle overlaps, as a mask in the order
 /// of [`for_cells`]: the tests of [`Filter`], written out for the small footprints almost every
 /// triangle has.
@@ -935,6 +1187,7 @@ fn cell_range(g: &Geometry, p: Vec3) -> [u32; 3] {
 mod tests {
     use super::*;
     use crate::accel::brute::BruteForce;
+    use crate::mesh::MeshData;
     use crate::procedural;
 
     fn agree(mesh: &TriMesh, grid: &UniformGrid, ray: &Ray) {
@@ -945,6 +1198,74 @@ mod tests {
             "{ray:?}: grid {got:?}, brute force {want:?}"
         );
         assert_eq!(grid.occluded(mesh, ray), want.is_hit(), "{ray:?}");
+    }
+
+    /// The cells of each triangle's footprint that the overlap filter accepts, found by testing
+    /// every cell (the reference) and by [`walk_footprint`]: the walk must find exactly the same
+    /// cells (it may test a few more, which the filter rejects), and must test few cells beyond
+    /// those it keeps. Slivers across the box, big triangles, sheets on cell planes, triangles far
+    /// from the origin and tiny ones.
+    #[test]
+    fn slab_walk_finds_exactly_the_cells_the_exact_test_accepts() {
+        let mut sheets = MeshData::default();
+        for k in 0..=8 {
+            let x = k as f32 / 8.0;
+            let b = sheets.vertices.len() as u32;
+            sheets
+                .vertices
+                .extend([[x, 0.0, 0.0], [x, 1.0, 0.3], [0.2, x, 1.0], [1.0, 1.0, x]]);
+            sheets
+                .indices
+                .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
+        }
+        let scenes = [
+            procedural::random_slivers(3000, 5),
+            procedural::random_slivers(500, 6).transformed(1e-6, [0.0; 3]),
+            procedural::random_slivers(500, 7).transformed(1.0, [1e7, -1e7, 3e6]),
+            procedural::random_soup(400, 8, 0.7),
+            procedural::teapot_in_stadium(200, 400),
+            sheets,
+        ];
+        for (s, data) in scenes.iter().enumerate() {
+            let mut budget = MemoryBudget::new(0);
+            let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+            let grid = UniformGrid::build(&mesh, &GridParams::FINE, &mut budget).unwrap();
+            let g = grid.geometry();
+            let (mut walked, mut kept, mut large) = (0usize, 0usize, 0usize);
+            for tri in mesh.triangles() {
+                let fp = Footprint::of(&g, tri);
+                let filter = Filter::new(&g, tri, &fp, true);
+                let mut want = Vec::new();
+                fp.for_each(&g, |cell, x, y, z| {
+                    if filter.overlaps(&g, x, y, z) {
+                        want.push(cell);
+                    }
+                });
+                let mut got = Vec::new();
+                walk_footprint(&g, tri, &fp, &mut |cell, x, y, z| {
+                    walked += 1;
+                    if filter.overlaps(&g, x, y, z) {
+                        got.push(cell);
+                    }
+                });
+                got.sort_unstable();
+                want.sort_unstable();
+                assert_eq!(got, want, "scene {s}: {tri:?}");
+                kept += want.len();
+                large += usize::from(worth_walking(&g, tri, &fp));
+            }
+            // The walk tests cells near the triangle only: a few more than it keeps.
+            assert!(
+                walked <= 3 * kept + 8 * mesh.len(),
+                "scene {s}: {walked} tested for {kept}"
+            );
+            if s < 3 {
+                assert!(
+                    large > 100,
+                    "scene {s}: the slivers should have large footprints"
+                );
+            }
+        }
     }
 
     /// Directions too small to invert in f32 (on every axis, or on the only moving axis of a scene far

@@ -1,0 +1,204 @@
+//! Allocation failure and memory limits: a counting global allocator that can be armed to refuse
+//! the k-th allocation on the current thread. For every k through a full `Scene::build` of a small
+//! scene (grid, kd-tree, Auto with a known and an unknown budget) the build returns `OutOfMemory`
+//! (never aborts) and every byte allocated during it has been given back; a memory-limit sweep
+//! from tiny to large either fits (`memory_bytes <= limit`) or returns `MemoryLimit`.
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use rayq::{procedural, BuildError, BuildOptions, Calibration, Scene, Structure};
+
+/// Passes every request to the system allocator, except that on a thread where it is armed it
+/// counts allocations and refuses the one numbered `fail_at`, and it keeps the thread's net live
+/// bytes (allocated minus freed). Per thread, so the test harness's other threads are untouched.
+struct Failing;
+
+thread_local! {
+    /// `Some(k)`: refuse the allocation when `COUNT` reaches k. `None`: not armed.
+    static FAIL_AT: Cell<Option<u64>> = const { Cell::new(None) };
+    static COUNT: Cell<u64> = const { Cell::new(0) };
+    static LIVE: Cell<i64> = const { Cell::new(0) };
+    static REFUSED: Cell<bool> = const { Cell::new(false) };
+}
+
+impl Failing {
+    /// True when this allocation is to be refused (and counts it).
+    fn refuse() -> bool {
+        let Some(k) = FAIL_AT.with(Cell::get) else {
+            return false;
+        };
+        let n = COUNT.with(|c| {
+            let n = c.get();
+            c.set(n + 1);
+            n
+        });
+        let refuse = n == k;
+        if refuse {
+            REFUSED.with(|r| r.set(true));
+        }
+        refuse
+    }
+
+    fn add(bytes: usize, sign: i64) {
+        LIVE.with(|l| l.set(l.get() + sign * bytes as i64));
+    }
+}
+
+// SAFETY: every call is forwarded to `System` unchanged or refused with a null pointer, which the
+// GlobalAlloc contract allows.
+unsafe impl GlobalAlloc for Failing {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if Failing::refuse() {
+            return std::ptr::null_mut();
+        }
+        let p = unsafe { System.alloc(layout) };
+        if !p.is_null() {
+            Failing::add(layout.size(), 1);
+        }
+        p
+    }
+
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        if Failing::refuse() {
+            return std::ptr::null_mut();
+        }
+        let p = unsafe { System.alloc_zeroed(layout) };
+        if !p.is_null() {
+            Failing::add(layout.size(), 1);
+        }
+        p
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        Failing::add(layout.size(), -1);
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if Failing::refuse() {
+            return std::ptr::null_mut();
+        }
+        let p = unsafe { System.realloc(ptr, layout, new_size) };
+        if !p.is_null() {
+            Failing::add(layout.size(), -1);
+            Failing::add(new_size, 1);
+        }
+        p
+    }
+}
+
+#[global_allocator]
+static ALLOCATOR: Failing = Failing;
+
+/// Runs `f` with the allocator armed to refuse allocation `k` on this thread. Returns `f`'s result
+/// (already dropped into a summary), whether the refusal happened, how many allocations `f` made,
+/// and its net live bytes afterwards.
+fn armed<T>(
+    k: Option<u64>,
+    f: impl FnOnce() -> T,
+    summary: impl FnOnce(&T) -> String,
+) -> (String, bool, u64, i64) {
+    COUNT.with(|c| c.set(0));
+    LIVE.with(|l| l.set(0));
+    REFUSED.with(|r| r.set(false));
+    // Count from here, but never refuse when k is None: u64::MAX is never reached.
+    FAIL_AT.with(|a| a.set(Some(k.unwrap_or(u64::MAX))));
+    let out = f();
+    FAIL_AT.with(|a| a.set(None));
+    let text = summary(&out);
+    drop(out);
+    // `text` was allocated while armed and is still alive: take it out of the balance.
+    let live = LIVE.with(Cell::get) - text.capacity() as i64;
+    (text, REFUSED.with(Cell::get), COUNT.with(Cell::get), live)
+}
+
+fn options(structure: Structure, expected_rays: u64, memory_limit: usize) -> BuildOptions {
+    BuildOptions {
+        structure,
+        expected_rays,
+        memory_limit,
+        ..BuildOptions::DEFAULT
+    }
+}
+
+/// The builds under test: every structure choice, and Auto both ways (a large known budget makes
+/// it build the grid, sample, build the kd-tree and check it).
+const BUILDS: [(&str, Structure, u64); 4] = [
+    ("grid", Structure::Grid, 0),
+    ("kd-tree", Structure::KdTree, 0),
+    ("auto, unknown budget", Structure::Auto, 0),
+    ("auto, 1e9 rays", Structure::Auto, 1_000_000_000),
+];
+
+#[test]
+fn every_refused_allocation_is_out_of_memory_and_leaks_nothing() {
+    // Small but with every path: a closed sphere (kd splits, grid cells) plus slivers.
+    let mut data = procedural::closed_sphere(4);
+    data.append(&procedural::random_slivers(40, 3));
+    let calibration = Calibration::builtin();
+    for (label, structure, rays) in BUILDS {
+        let opts = options(structure, rays, 0);
+        let build = || Scene::build(&data.as_source(), &opts, calibration);
+        let (ok, _, total, live) = armed(None, build, |r| format!("{:?}", r.is_ok()));
+        assert_eq!(ok, "true", "{label}: the unarmed build must succeed");
+        assert_eq!(
+            live, 0,
+            "{label}: a built and dropped scene left {live} bytes alive"
+        );
+        assert!(
+            total >= 3,
+            "{label}: only {total} allocations; the sweep would prove nothing"
+        );
+        for k in 0..total {
+            let (result, refused, _, live) = armed(Some(k), build, |r| match r {
+                Err(BuildError::OutOfMemory { .. }) => "oom".to_string(),
+                Err(e) => format!("other error {e:?}"),
+                Ok(_) => "ok".to_string(),
+            });
+            assert!(refused, "{label}: allocation {k} of {total} never happened");
+            assert_eq!(result, "oom", "{label}: refusing allocation {k} of {total}");
+            assert_eq!(
+                live, 0,
+                "{label}: {live} bytes still alive after refusing allocation {k}"
+            );
+        }
+    }
+}
+
+#[test]
+fn memory_limit_sweep_fits_or_refuses() {
+    let data = procedural::by_name("stadium", 2000).unwrap();
+    let calibration = Calibration::builtin();
+    for (label, structure, rays) in BUILDS {
+        let mut limit = 1usize;
+        let mut fitted = false;
+        while limit < 64 << 20 {
+            match Scene::build(
+                &data.as_source(),
+                &options(structure, rays, limit),
+                calibration,
+            ) {
+                Ok(scene) => {
+                    let bytes = scene.report().memory_bytes;
+                    assert!(
+                        bytes <= limit,
+                        "{label}: {bytes} bytes held under a {limit}-byte limit"
+                    );
+                    fitted = true;
+                }
+                Err(BuildError::MemoryLimit { .. }) => {
+                    assert!(
+                        !fitted,
+                        "{label}: refused at {limit} bytes after fitting in less"
+                    );
+                }
+                Err(e) => panic!("{label}: limit {limit}: {e:?}"),
+            }
+            limit = limit * 5 / 4 + 1;
+        }
+        assert!(fitted, "{label}: never fitted under 64 MiB");
+    }
+}
