@@ -1,8 +1,8 @@
 //! The reference structure: every triangle, in id order, through the shared test.
 
-use crate::accel::{Aabb, RayQuery};
+use crate::accel::{run_query, Aabb, RayQuery};
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray, TriangleLoop, TriangleTest};
+use crate::ray::{Hit, Ray, TriangleLoop, TriangleTest};
 
 /// Tests every non-degenerate triangle. Slow and obviously right: the other structures are checked
 /// against it bit for bit.
@@ -68,18 +68,10 @@ impl RayQuery for BruteForce {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else {
-            return Hit::MISS;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(AllTriangles { mesh, any: false })
+        run_query(mesh, ray, AllTriangles { mesh, any: false })
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        let Some(r) = PreparedRay::new(ray) else {
-            return false;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(AllTriangles { mesh, any: true }).is_hit()
+        run_query(mesh, ray, AllTriangles { mesh, any: true }).is_hit()
     }
 }

@@ -4,12 +4,12 @@
 use alloc::vec::Vec;
 use glam::Vec3;
 
-use crate::accel::{Aabb, RayQuery};
+use crate::accel::{run_query, test_prims, Aabb, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE};
+use crate::ray::{Hit, Ray, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE};
 
 /// The grid's knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -269,15 +269,15 @@ impl UniformGrid {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else {
-            return Hit::MISS;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<true, false> {
-            grid: self,
+        run_query(
             mesh,
-            work,
-        })
+            ray,
+            Walk::<true, false> {
+                grid: self,
+                mesh,
+                work,
+            },
+        )
     }
 
     fn geometry(&self) -> Geometry {
@@ -310,27 +310,29 @@ impl RayQuery for UniformGrid {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else {
-            return Hit::MISS;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<false, false> {
-            grid: self,
+        let work = &mut GridWork::default();
+        run_query(
             mesh,
-            work: &mut GridWork::default(),
-        })
+            ray,
+            Walk::<false, false> {
+                grid: self,
+                mesh,
+                work,
+            },
+        )
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        let Some(r) = PreparedRay::new(ray) else {
-            return false;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<false, true> {
-            grid: self,
+        let work = &mut GridWork::default();
+        run_query(
             mesh,
-            work: &mut GridWork::default(),
-        })
+            ray,
+            Walk::<false, true> {
+                grid: self,
+                mesh,
+                work,
+            },
+        )
         .is_hit()
     }
 }
@@ -475,19 +477,8 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 }
                 core::hint::black_box(acc);
             }
-            for &prim in prims {
-                let Some(tri) = mesh.triangle(prim) else {
-                    continue;
-                };
-                if let Some((t, u, v)) = test.test(tri) {
-                    let h = Hit { t, u, v, prim };
-                    if ANY {
-                        return h;
-                    }
-                    if h.beats(&best) {
-                        best = h;
-                    }
-                }
+            if let Some(h) = test_prims::<T, ANY>(&test, mesh, prims, &mut best) {
+                return h;
             }
             // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit
             // inside the cell cannot be beaten.

@@ -3,7 +3,7 @@
 use glam::Vec3;
 
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, Ray};
+use crate::ray::{Hit, PreparedRay, Ray, TriangleLoop, TriangleTest};
 
 pub mod brute;
 pub mod grid;
@@ -71,4 +71,41 @@ pub trait RayQuery {
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit;
     /// True when any triangle is hit in `[tmin, tmax]`.
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool;
+}
+
+/// Prepares `ray` for the triangles of `mesh` and runs `walk` with the triangle test specialised for
+/// the ray's axes: the one entry of every structure's queries. A ray that can hit nothing (see
+/// [`PreparedRay::new`]) is a miss without a walk.
+#[inline(always)]
+pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(mesh: &TriMesh, ray: &Ray, walk: L) -> Hit {
+    match PreparedRay::new(ray) {
+        Some(r) => r.far_bound(mesh.coordinate_bound()).dispatch(walk),
+        None => Hit::MISS,
+    }
+}
+
+/// Tests the triangles `prims` (a cell's or a leaf's list) and keeps the best hit in `best` by the
+/// shared tie rule ([`Hit::beats`]). With `ANY`, returns the first hit at once.
+#[inline(always)]
+pub(crate) fn test_prims<T: TriangleTest, const ANY: bool>(
+    test: &T,
+    mesh: &TriMesh,
+    prims: &[u32],
+    best: &mut Hit,
+) -> Option<Hit> {
+    for &prim in prims {
+        let Some(tri) = mesh.triangle(prim) else {
+            continue;
+        };
+        if let Some((t, u, v)) = test.test(tri) {
+            let h = Hit { t, u, v, prim };
+            if ANY {
+                return Some(h);
+            }
+            if h.beats(best) {
+                *best = h;
+            }
+        }
+    }
+    None
 }

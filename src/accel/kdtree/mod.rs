@@ -3,11 +3,11 @@
 
 use alloc::vec::Vec;
 
-use crate::accel::{Aabb, RayQuery};
+use crate::accel::{run_query, Aabb, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, PreparedRay, Ray};
+use crate::ray::{Hit, Ray};
 
 mod build;
 pub mod node;
@@ -203,15 +203,15 @@ impl KdTree {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else {
-            return Hit::MISS;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<true, false> {
-            tree: self,
+        run_query(
             mesh,
-            work,
-        })
+            ray,
+            Walk::<true, false> {
+                tree: self,
+                mesh,
+                work,
+            },
+        )
     }
 }
 
@@ -221,27 +221,29 @@ impl RayQuery for KdTree {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let Some(r) = PreparedRay::new(ray) else {
-            return Hit::MISS;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<false, false> {
-            tree: self,
+        let work = &mut KdWork::default();
+        run_query(
             mesh,
-            work: &mut KdWork::default(),
-        })
+            ray,
+            Walk::<false, false> {
+                tree: self,
+                mesh,
+                work,
+            },
+        )
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        let Some(r) = PreparedRay::new(ray) else {
-            return false;
-        };
-        let r = r.far_bound(mesh.coordinate_bound());
-        r.dispatch(Walk::<false, true> {
-            tree: self,
+        let work = &mut KdWork::default();
+        run_query(
             mesh,
-            work: &mut KdWork::default(),
-        })
+            ray,
+            Walk::<false, true> {
+                tree: self,
+                mesh,
+                work,
+            },
+        )
         .is_hit()
     }
 }

@@ -11,6 +11,7 @@
 use glam::Vec3;
 
 use super::{KdTree, KdWork, MAX_DEPTH};
+use crate::accel::test_prims;
 use crate::mesh::TriMesh;
 use crate::ray::{
     Hit, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE, NEAR_MISS_TOLERANCE_PER_DISTANCE,
@@ -170,19 +171,8 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                     work.leaves += 1;
                     work.tests += prims.len() as u32;
                 }
-                for &prim in prims {
-                    let Some(tri) = mesh.triangle(prim) else {
-                        continue;
-                    };
-                    if let Some((t, u, v)) = test.test(tri) {
-                        let h = Hit { t, u, v, prim };
-                        if ANY {
-                            return h;
-                        }
-                        if h.beats(&best) {
-                            best = h;
-                        }
-                    }
+                if let Some(h) = test_prims::<T, ANY>(&test, mesh, prims, &mut best) {
+                    return h;
                 }
             }
             // Next pending subtree that may still hold a hit at or before the best one.
