@@ -964,6 +964,31 @@ fn analyse(results: &[Measured], args: &Args) -> String {
                 .collect();
             let _ = writeln!(md, "| {} | {} |", m.name, cells.join(" | "));
         }
+        let _ = writeln!(md, "\n| budget | scenes where AUTO beats the best peer | AUTO / best peer, range |\n|---|---:|---:|");
+        for e in 3..=8 {
+            let r = 10f64.powi(e);
+            let ratios: Vec<f64> = results
+                .iter()
+                .enumerate()
+                .filter(|(_, m)| !m.peers.is_empty())
+                .map(|(i, m)| {
+                    let best = m
+                        .peers
+                        .iter()
+                        .map(|p| (p.build_ns + r * p.ray_ns) * 1e-9)
+                        .fold(f64::INFINITY, f64::min);
+                    at(i, r).auto_known / best
+                })
+                .collect();
+            let wins = ratios.iter().filter(|&&q| q < 1.0).count();
+            let lo = ratios.iter().copied().fold(f64::INFINITY, f64::min);
+            let hi = ratios.iter().copied().fold(0.0, f64::max);
+            let _ = writeln!(
+                md,
+                "| 10^{e} | {wins} of {} | {lo:.2}–{hi:.2} |",
+                ratios.len()
+            );
+        }
     }
     md
 }
