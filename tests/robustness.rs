@@ -487,7 +487,6 @@ fn c_boundary_small_scene() {
 /// and every triangle the ray meets ties at the same `t`. Outside the documented range (origins
 /// within ~4000 cells of the grid, docs/design.md), recorded in docs/robustness.md.
 #[test]
-#[ignore = "outside the documented origin range: ties at a far origin (docs/robustness.md)"]
 fn ties_seen_from_a_far_origin_agree() {
     let mut data = procedural::closed_sphere(8);
     data.append(&procedural::random_slivers(200, 9).transformed(2.0, [-1.0, -1.0, -1.0]));
@@ -510,7 +509,6 @@ fn ties_seen_from_a_far_origin_agree() {
 /// up) from inside the scene. Crossing the scene takes `t` beyond ~1e38, the walk's boundary `t`s
 /// overflow, and the grid misses a hit at t = 1.5e38 that brute force and the kd-tree find.
 #[test]
-#[ignore = "known grid bug: tiny directions whose t overflows (docs/robustness.md)"]
 fn tiny_directions_that_overflow_t_agree() {
     let mut data = procedural::closed_sphere(8);
     data.append(&procedural::random_slivers(200, 9).transformed(2.0, [-1.0, -1.0, -1.0]));

@@ -157,13 +157,10 @@ fuzz_target!(|data: &[u8]| {
         // ~1e38 away, a direction of ~1e38 and subnormal `t`), many triangles tie at one `t` and
         // the grid may stop before the lowest id (docs/robustness.md, a known grid bug); the
         // structures must agree everywhere else.
-        // Directions so short that crossing the scene takes t beyond f32 range: the grid's walk
-        // overflows and misses (docs/robustness.md, a known grid bug).
-        let speed = ray.dir.iter().fold(0.0f32, |m, d| m.max(d.abs()));
         // Origins far outside the documented range (within ~4000 cells, docs/design.md): the
         // shared triangle test itself can report false hits there (docs/robustness.md).
         let far = ray.org.iter().any(|o| !(o.abs() <= 1e3));
-        if coarse_t(g, ray) || coarse_t(k, ray) || speed < 1e-36 || far {
+        if coarse_t(g, ray) || coarse_t(k, ray) || far {
             continue;
         }
         assert!(same(g, k), "grid {g:?} vs kd-tree {k:?} on {ray:?}");

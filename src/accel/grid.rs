@@ -367,17 +367,24 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         }
         let (o, mut d) = (r.org, r.dir);
         let (mut t0, mut t1) = (r.tmin, r.tmax);
-        // When no component of the direction can be inverted (all below ~3e-39), the ray still moves
-        // through the grid over its f32 range of t. Walk the same line with a scaled direction, over
-        // the whole box and without the early exit, whose t would be in the wrong units.
-        let inverts = |d: Vec3| (0..3).any(|a| (1.0 / d[a]).is_finite());
-        let early_exit = inverts(d);
+        // A direction with a non-zero component too small to invert (below ~3e-39) still moves along
+        // that axis over the f32 range of t, and one small against the scene's coordinates can make
+        // the t of crossing the scene overflow. Walk the same line with a scaled direction (a power
+        // of two: no rounding), over the whole box and without the early exit, whose t would be in
+        // the wrong units. Only when the scaled direction stays finite (|d| ≤ 2^27); above that a
+        // component too small to invert moves the ray by less than 1e-46 of the scene while it
+        // crosses it, far inside the cells' margin, so treating it as parallel is exact enough.
+        let (lo, hi) = (grid.bounds.min, grid.bounds.max);
+        let largest = d.abs().max_element();
+        let reach = lo.abs().max(hi.abs()).max_element() + o.abs().max_element();
+        let uninvertible = (0..3).any(|a| d[a] != 0.0 && !(1.0 / d[a]).is_finite());
+        let may_overflow = largest * (f32::MAX / 1024.0) < reach;
+        let early_exit = !((uninvertible || may_overflow) && largest <= 134_217_728.0);
         if !early_exit {
             d *= TINY_DIRECTION_SCALE;
             t0 = -f32::INFINITY;
             t1 = f32::INFINITY;
         }
-        let (lo, hi) = (grid.bounds.min, grid.bounds.max);
         let mut inv = [0.0f32; 3];
         let mut moving = [false; 3];
         for a in 0..3 {
