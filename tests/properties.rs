@@ -113,18 +113,6 @@ fn ray_spec() -> impl Strategy<Value = RaySpec> {
         })
 }
 
-/// Values that break direction handling.
-const ODD: [f32; 8] = [
-    0.0,
-    -0.0,
-    1e-40,
-    -1e-45,
-    1e-30,
-    1e30,
-    -f32::MAX,
-    f32::MIN_POSITIVE,
-];
-
 impl RaySpec {
     fn ray(&self, mesh: &TriMesh) -> Ray {
         let tris = mesh.triangles();
@@ -155,8 +143,8 @@ impl RaySpec {
             }
             2 => {
                 let mut d = f;
-                d[(self.a % 3) as usize] = ODD[(self.b % 8) as usize];
-                d[(self.b % 3) as usize] = ODD[(self.a % 8) as usize];
+                d[(self.a % 3) as usize] = common::ODD_COMPONENTS[(self.b % 8) as usize];
+                d[(self.b % 3) as usize] = common::ODD_COMPONENTS[(self.a % 8) as usize];
                 d
             }
             3 => vertex(self.b) - org,

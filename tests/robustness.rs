@@ -9,7 +9,7 @@
 mod common;
 
 use common::{
-    aimed_rays, assert_agrees, bundled, grid_planes, hostile_rays, mesh_of, nan_rays,
+    aimed_rays, assert_agrees, bundled, grid_planes, hostile_rays, mesh_of, nan_rays, quad,
     reference_hits, test_rays,
 };
 use glam::Vec3;
@@ -52,13 +52,6 @@ fn check(name: &str, data: &MeshData) -> (TriMesh, UniformGrid, KdTree) {
         }
     }
     (mesh, grid, tree)
-}
-
-fn quad(data: &mut MeshData, p: [[f32; 3]; 4]) {
-    let b = data.vertices.len() as u32;
-    data.vertices.extend(p);
-    data.indices
-        .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
 }
 
 #[test]

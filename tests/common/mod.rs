@@ -89,16 +89,7 @@ pub fn hostile_rays(
     // A direction with a hostile component on one random axis and ordinary ones elsewhere.
     let hostile_dir = |rng: &mut SplitMix64| {
         let mut d = rng.unit_vector();
-        let odd = [
-            0.0,
-            -0.0,
-            1e-40,
-            -1e-45,
-            1e-30,
-            1e30,
-            -f32::MAX,
-            f32::MIN_POSITIVE,
-        ];
+        let odd = ODD_COMPONENTS;
         let a = rng.below(3);
         d[a] = odd[rng.below(odd.len())];
         if rng.next_f32() < 0.3 {
@@ -191,4 +182,24 @@ pub fn aimed_rays(mesh: &TriMesh, limit: usize, seed: u64) -> Vec<Ray> {
         }
     }
     rays
+}
+
+/// Direction components that break direction handling: signed zeros, denormals, tiny, huge.
+pub const ODD_COMPONENTS: [f32; 8] = [
+    0.0,
+    -0.0,
+    1e-40,
+    -1e-45,
+    1e-30,
+    1e30,
+    -f32::MAX,
+    f32::MIN_POSITIVE,
+];
+
+/// Appends the quad `p` (corners 0, 1, 2, 3 with 0–3 a diagonal) as two triangles.
+pub fn quad(data: &mut MeshData, p: [[f32; 3]; 4]) {
+    let b = data.vertices.len() as u32;
+    data.vertices.extend(p);
+    data.indices
+        .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
 }
