@@ -10,7 +10,9 @@ use rayq::select::calibration::{Calibration, BLOB_LEN};
 fuzz_target!(|data: &[u8]| {
     if let Ok(c) = Calibration::from_bytes(data) {
         let mut out = [0u8; BLOB_LEN];
-        let n = c.to_bytes(&mut out).expect("an accepted calibration writes");
+        let n = c
+            .to_bytes(&mut out)
+            .expect("an accepted calibration writes");
         assert_eq!(Calibration::from_bytes(&out[..n]), Ok(c));
     }
 });

@@ -11,6 +11,9 @@
 
 use core::ptr;
 use libfuzzer_sys::fuzz_target;
+
+#[path = "shared.rs"]
+mod shared;
 use rayq::capi::*;
 
 fuzz_target!(|data: &[u8]| {
@@ -79,21 +82,9 @@ fuzz_target!(|data: &[u8]| {
             dir: [w[3] - w[0], w[4] - w[1], w[5] - w[2]],
             tmax: f32::INFINITY,
         };
-        let mut hit = rq_hit {
-            t: 0.0,
-            u: 0.0,
-            v: 0.0,
-            prim: 0,
-        };
-        // SAFETY: scene is live, ray and hit are valid.
-        let (h, o) = unsafe {
-            (
-                rq_scene_intersect(scene, &ray, &mut hit),
-                rq_scene_occluded(scene, &ray),
-            )
-        };
-        assert_eq!(h, o, "intersect and occluded disagree on {ray:?}");
-        assert_eq!(h, hit.prim != RQ_INVALID_ID);
+        // SAFETY: scene is live.
+        let hit = unsafe { shared::query(scene, &ray, "scene_build") };
+        let h = hit.prim != RQ_INVALID_ID;
         if h {
             assert!(hit.prim < triangle_count as u32 && hit.t >= 0.0, "{hit:?}");
         }

@@ -12,6 +12,9 @@ use core::ptr;
 use std::sync::OnceLock;
 
 use libfuzzer_sys::fuzz_target;
+
+#[path = "shared.rs"]
+mod shared;
 use rayq::capi::*;
 use rayq::mesh::MeshData;
 use rayq::procedural;
@@ -104,23 +107,9 @@ fuzz_target!(|data: &[u8]| {
     let mut answers = [Vec::new(), Vec::new()];
     for (s, scene) in scenes.iter().enumerate() {
         for ray in &rays {
-            let mut hit = rq_hit {
-                t: 0.0,
-                u: 0.0,
-                v: 0.0,
-                prim: 0,
-            };
-            // SAFETY: the scene is live and never freed; ray and hit are valid.
-            let (h, o) = unsafe {
-                (
-                    rq_scene_intersect(*scene, ray, &mut hit),
-                    rq_scene_occluded(*scene, ray),
-                )
-            };
-            assert_eq!(
-                h, o,
-                "scene {s}: intersect and occluded disagree on {ray:?}"
-            );
+            // SAFETY: the scene is live and never freed.
+            let hit = unsafe { shared::query(*scene, ray, &format!("scene {s}")) };
+            let h = hit.prim != RQ_INVALID_ID;
             if !h {
                 assert!(
                     hit.t == f32::INFINITY
