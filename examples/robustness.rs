@@ -23,13 +23,6 @@ fn scene(spec: &str) -> MeshData {
     rayq::obj::load_obj(spec).unwrap()
 }
 
-fn quad(data: &mut MeshData, p: [[f32; 3]; 4]) {
-    let b = data.vertices.len() as u32;
-    data.vertices.extend(p);
-    data.indices
-        .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
-}
-
 fn case(name: &str) -> MeshData {
     match name {
         "duplicates" => {
@@ -44,15 +37,12 @@ fn case(name: &str) -> MeshData {
             for k in 0..2000 {
                 let s = 0.1 + (k % 37) as f32 * 0.02;
                 let o = (k % 91) as f32 * 0.01;
-                quad(
-                    &mut d,
-                    [
-                        [o, o, 0.0],
-                        [o + s, o, 0.0],
-                        [o, o + s, 0.0],
-                        [o + s, o + s, 0.0],
-                    ],
-                );
+                d.push_quad([
+                    [o, o, 0.0],
+                    [o + s, o, 0.0],
+                    [o, o + s, 0.0],
+                    [o + s, o + s, 0.0],
+                ]);
             }
             d
         }
@@ -60,14 +50,8 @@ fn case(name: &str) -> MeshData {
             let mut d = MeshData::default();
             for k in 0..=16 {
                 let x = k as f32 / 16.0;
-                quad(
-                    &mut d,
-                    [[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]],
-                );
-                quad(
-                    &mut d,
-                    [[0.0, x, 0.0], [1.0, x, 0.0], [0.0, x, 1.0], [1.0, x, 1.0]],
-                );
+                d.push_quad([[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]]);
+                d.push_quad([[0.0, x, 0.0], [1.0, x, 0.0], [0.0, x, 1.0], [1.0, x, 1.0]]);
             }
             d
         }
@@ -78,15 +62,12 @@ fn case(name: &str) -> MeshData {
         },
         "two" => {
             let mut d = MeshData::default();
-            quad(
-                &mut d,
-                [
-                    [0.0, 0.0, 0.0],
-                    [1.0, 0.0, 0.0],
-                    [0.0, 1.0, 0.0],
-                    [1.0, 1.0, 0.0],
-                ],
-            );
+            d.push_quad([
+                [0.0, 0.0, 0.0],
+                [1.0, 0.0, 0.0],
+                [0.0, 1.0, 0.0],
+                [1.0, 1.0, 0.0],
+            ]);
             d
         }
         "huge" => procedural::closed_sphere(40).transformed(1.0, [1e7, -1e7, 1e7]),

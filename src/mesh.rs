@@ -237,6 +237,14 @@ pub struct MeshData {
 }
 
 impl MeshData {
+    /// Appends the quad with corners `p` (0–3 a diagonal) as the two triangles (0, 1, 2), (2, 1, 3).
+    pub fn push_quad(&mut self, p: [[f32; 3]; 4]) {
+        let b = self.vertices.len() as u32;
+        self.vertices.extend(p);
+        self.indices
+            .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
+    }
+
     /// Borrows the data as a [`MeshSource`].
     pub fn as_source(&self) -> IndexedMesh<'_> {
         IndexedMesh {

@@ -163,10 +163,7 @@ fn axis_aligned_sheets_on_cell_boundaries() {
     let mut data = MeshData::default();
     for k in 0..=4 {
         let x = k as f32 / 4.0;
-        common::quad(
-            &mut data,
-            [[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]],
-        );
+        data.push_quad([[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]]);
     }
     check("sheets", &data, 16, 800);
 }

@@ -9,7 +9,7 @@
 mod common;
 
 use common::{
-    aimed_rays, assert_agrees, bundled, grid_planes, hostile_rays, mesh_of, nan_rays, quad,
+    aimed_rays, assert_agrees, bundled, grid_planes, hostile_rays, mesh_of, nan_rays,
     reference_hits, test_rays,
 };
 use glam::Vec3;
@@ -77,15 +77,12 @@ fn many_duplicate_and_coplanar_triangles() {
     for k in 0..60 {
         let s = 0.25 + (k % 7) as f32 * 0.125;
         let o = (k % 5) as f32 * 0.125 - 1.0;
-        quad(
-            &mut data,
-            [
-                [o, o, 0.0],
-                [o + s, o, 0.0],
-                [o, o + s, 0.0],
-                [o + s, o + s, 0.0],
-            ],
-        );
+        data.push_quad([
+            [o, o, 0.0],
+            [o + s, o, 0.0],
+            [o, o + s, 0.0],
+            [o + s, o + s, 0.0],
+        ]);
     }
     let (mesh, grid, tree) = check("duplicates", &data);
     // Ties go to the lowest id: a hit on the spheres is on the first copy.
@@ -109,18 +106,9 @@ fn axis_aligned_sheets_on_cell_and_split_planes() {
     let mut data = MeshData::default();
     for k in 0..=8 {
         let c = k as f32 / 8.0;
-        quad(
-            &mut data,
-            [[c, 0.0, 0.0], [c, 1.0, 0.0], [c, 0.0, 1.0], [c, 1.0, 1.0]],
-        );
-        quad(
-            &mut data,
-            [[0.0, c, 0.0], [1.0, c, 0.0], [0.0, c, 1.0], [1.0, c, 1.0]],
-        );
-        quad(
-            &mut data,
-            [[0.0, 0.0, c], [1.0, 0.0, c], [0.0, 1.0, c], [1.0, 1.0, c]],
-        );
+        data.push_quad([[c, 0.0, 0.0], [c, 1.0, 0.0], [c, 0.0, 1.0], [c, 1.0, 1.0]]);
+        data.push_quad([[0.0, c, 0.0], [1.0, c, 0.0], [0.0, c, 1.0], [1.0, c, 1.0]]);
+        data.push_quad([[0.0, 0.0, c], [1.0, 0.0, c], [0.0, 1.0, c], [1.0, 1.0, c]]);
     }
     let (mesh, grid, _) = check("sheets xyz", &data);
     // Rays travelling inside a sheet's plane (origin on the plane, direction in it) graze it: the
@@ -157,15 +145,12 @@ fn one_and_two_triangles_with_hostile_rays() {
     };
     check("one", &one);
     let mut two = MeshData::default();
-    quad(
-        &mut two,
-        [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [0.0, 1.0, 0.0],
-            [1.0, 1.0, 0.0],
-        ],
-    );
+    two.push_quad([
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.0],
+    ]);
     let (mesh, grid, tree) = check("two", &two);
     // Straight down through the shared edge and through the shared vertices: never a miss.
     for p in [[0.5, 0.5], [0.25, 0.75], [1.0, 0.0], [0.0, 1.0], [0.9, 0.1]] {
@@ -512,15 +497,12 @@ fn tiny_directions_that_overflow_t_agree() {
     let mut data = fuzz_scene();
     for k in 0..=4 {
         let c = k as f32 / 2.0 - 1.0;
-        quad(
-            &mut data,
-            [
-                [c, -1.0, -1.0],
-                [c, 1.0, -1.0],
-                [c, -1.0, 1.0],
-                [c, 1.0, 1.0],
-            ],
-        );
+        data.push_quad([
+            [c, -1.0, -1.0],
+            [c, 1.0, -1.0],
+            [c, -1.0, 1.0],
+            [c, 1.0, 1.0],
+        ]);
     }
     let ray = Ray::segment(
         Vec3::new(-6.693_881e-9, 2.0089e-41, 1.182_597_3e-38),

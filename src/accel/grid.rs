@@ -1208,13 +1208,7 @@ mod tests {
         let mut sheets = MeshData::default();
         for k in 0..=8 {
             let x = k as f32 / 8.0;
-            let b = sheets.vertices.len() as u32;
-            sheets
-                .vertices
-                .extend([[x, 0.0, 0.0], [x, 1.0, 0.3], [0.2, x, 1.0], [1.0, 1.0, x]]);
-            sheets
-                .indices
-                .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
+            sheets.push_quad([[x, 0.0, 0.0], [x, 1.0, 0.3], [0.2, x, 1.0], [1.0, 1.0, x]]);
         }
         let scenes = [
             procedural::random_slivers(3000, 5),

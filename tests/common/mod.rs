@@ -195,11 +195,3 @@ pub const ODD_COMPONENTS: [f32; 8] = [
     -f32::MAX,
     f32::MIN_POSITIVE,
 ];
-
-/// Appends the quad `p` (corners 0, 1, 2, 3 with 0–3 a diagonal) as two triangles.
-pub fn quad(data: &mut MeshData, p: [[f32; 3]; 4]) {
-    let b = data.vertices.len() as u32;
-    data.vertices.extend(p);
-    data.indices
-        .extend([[b, b + 1, b + 2], [b + 2, b + 1, b + 3]]);
-}
