@@ -79,8 +79,9 @@ impl CostEstimate {
 
 /// What a kd-tree node visit costs relative to a grid cell step in [`kd_tree_confirmed`]: a cell step
 /// also reads the cell's reference range and touches its triangles, a node visit is a few compares
-/// on 8 bytes. On the 16 scenes measured for it (docs/design.md, "Selector") every value from 0.24
-/// to 0.84 tells the faster structure apart; 0.5 sits in the middle.
+/// on 8 bytes. On 15 scenes (counted work on the default sample rays against the evaluation's
+/// measured per-ray times; docs/design.md, "Selector") every value from 0.24 to 0.84 tells the
+/// faster structure apart; 0.5 sits in the middle.
 pub const KD_NODE_PER_CELL_STEP: f64 = 0.5;
 
 /// The check after a kd-tree was built on an estimate: keep it only if its counted work on the

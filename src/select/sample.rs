@@ -49,7 +49,8 @@ pub struct SampleParams {
 }
 
 impl SampleParams {
-    /// 24 × 24 camera rays and their bounces (about 1 000 rays).
+    /// 24 × 24 camera rays and their bounces: at most 1 152 rays (781 on the evaluation's median
+    /// scene, where many camera rays miss).
     pub const DEFAULT: SampleParams = SampleParams {
         camera_side: 24,
         seed: 0x5a3b_1e5d,
