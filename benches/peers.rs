@@ -28,7 +28,7 @@ use criterion::{
     criterion_group, criterion_main, BenchmarkId, Criterion, SamplingMode, Throughput,
 };
 
-use rayq::ray::PreparedRay;
+use rayq::triangle::PreparedRay;
 use rayq::workload::{bounce_rays, camera_rays, SplitMix64};
 use rayq::{BuildOptions, Calibration, Hit, MemoryBudget, Ray, Scene, Structure, TriMesh};
 

@@ -32,6 +32,7 @@ pub mod procedural;
 pub mod ray;
 pub mod scene;
 pub mod select;
+pub mod triangle;
 pub mod workload;
 
 #[cfg(feature = "capi")]
@@ -42,13 +43,14 @@ pub mod obj;
 pub use accel::brute::BruteForce;
 pub use accel::grid::{GridParams, UniformGrid};
 pub use accel::kdtree::{KdTree, KdTreeParams};
-pub use accel::{Aabb, RayQuery};
+pub use accel::RayQuery;
 pub use budget::MemoryBudget;
 pub use error::{BuildError, CalibError, MeshError};
 pub use mesh::TriMesh;
-pub use ray::{Hit, Ray};
+pub use ray::{Aabb, Hit, Ray};
 pub use scene::{BuildOptions, Scene, Structure};
 pub use select::calibration::Calibration;
+pub use triangle::packs::TriangleLayout;
 
 /// The README's Rust example is compiled and run as a doctest.
 #[cfg(doctest)]

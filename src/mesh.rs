@@ -3,9 +3,9 @@
 use alloc::vec::Vec;
 use glam::Vec3;
 
-use crate::accel::Aabb;
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::{BuildError, MeshError};
+use crate::ray::Aabb;
 
 /// A triangle mesh that passed validation, stored as three vertices per triangle so that a query reads
 /// one contiguous record per triangle test.

@@ -4,9 +4,9 @@
 use alloc::vec::Vec;
 use glam::Vec3;
 
-use crate::accel::Aabb;
 use crate::math;
 use crate::mesh::TriMesh;
+use crate::ray::Aabb;
 use crate::ray::{Hit, Ray};
 
 /// A small, fast, deterministic PRNG (SplitMix64). Not for cryptography.

@@ -5,17 +5,18 @@ mod common;
 use common::{assert_agrees, bundled, mesh_of, reference_hits, test_rays};
 use rayq::mesh::MeshData;
 use rayq::procedural;
-use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, UniformGrid};
+use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, TriangleLayout, UniformGrid};
 
 const GRIDS: [(&str, GridParams); 4] = [
     ("default", GridParams::DEFAULT),
     ("coarse", GridParams::COARSE),
     ("fine", GridParams::FINE),
     (
-        "bbox-only",
+        "bbox-only-indexed",
         GridParams {
             density: 2.0,
             exact_overlap: false,
+            layout: TriangleLayout::Indexed,
         },
     ),
 ];
@@ -33,10 +34,11 @@ const KDTREES: [(&str, KdTreeParams); 4] = [
         },
     ),
     (
-        "kd-shallow",
+        "kd-shallow-indexed",
         KdTreeParams {
             intersection_cost: 0.5,
             max_depth: 6,
+            layout: TriangleLayout::Indexed,
             ..KdTreeParams::DEFAULT
         },
     ),

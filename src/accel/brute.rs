@@ -2,7 +2,8 @@
 
 use crate::accel::{run_query, Aabb, RayQuery};
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, Ray, TriangleLoop, TriangleTest};
+use crate::ray::{Hit, Ray};
+use crate::triangle::{TriangleLoop, TriangleTest};
 
 /// Tests every non-degenerate triangle. Slow and obviously right: the other structures are checked
 /// against it bit for bit.
@@ -21,45 +22,51 @@ impl BruteForce {
 }
 
 /// The loop over every triangle, run with the test specialised for the ray's axes.
-struct AllTriangles<'a> {
+struct AllTriangles<'a, const ANY: bool> {
     mesh: &'a TriMesh,
-    /// Stop at the first hit (for `occluded`).
-    any: bool,
 }
 
-impl TriangleLoop for AllTriangles<'_> {
+impl<const ANY: bool> TriangleLoop for AllTriangles<'_, ANY> {
     type Output = Hit;
 
     #[inline(always)]
     fn run<T: TriangleTest>(self, test: T) -> Hit {
-        let mut best = Hit::MISS;
-        let tris = self.mesh.triangles();
-        let bits = self.mesh.degenerate_bits();
-        // 32 triangles per word of degenerate flags; the last chunk may be shorter.
-        for (chunk_index, (chunk, &flags)) in tris.chunks(32).zip(bits).enumerate() {
-            let base = chunk_index * 32;
-            for (k, tri) in chunk.iter().enumerate() {
-                if flags & (1 << k) != 0 {
-                    continue;
-                }
-                if let Some((t, u, v)) = test.test(tri) {
-                    let h = Hit {
-                        t,
-                        u,
-                        v,
-                        prim: (base + k) as u32,
-                    };
-                    if h.beats(&best) {
-                        best = h;
-                        if self.any {
-                            return best;
-                        }
+        test_all::<T, ANY>(&test, self.mesh)
+    }
+}
+
+/// Every non-degenerate triangle of `mesh` through the scalar exact test (no filter), in id order
+/// (out of line: the grid calls it for rays from beyond its reach, and one copy per kernel serves):
+/// the closest hit by the shared tie rule, or with `ANY` the first hit found.
+#[inline(never)]
+pub(crate) fn test_all<T: TriangleTest, const ANY: bool>(test: &T, mesh: &TriMesh) -> Hit {
+    let mut best = Hit::MISS;
+    let tris = mesh.triangles();
+    let bits = mesh.degenerate_bits();
+    // 32 triangles per word of degenerate flags; the last chunk may be shorter.
+    for (chunk_index, (chunk, &flags)) in tris.chunks(32).zip(bits).enumerate() {
+        let base = chunk_index * 32;
+        for (k, tri) in chunk.iter().enumerate() {
+            if flags & (1 << k) != 0 {
+                continue;
+            }
+            if let Some((t, u, v)) = test.test(tri) {
+                let h = Hit {
+                    t,
+                    u,
+                    v,
+                    prim: (base + k) as u32,
+                };
+                if h.beats(&best) {
+                    best = h;
+                    if ANY {
+                        return best;
                     }
                 }
             }
         }
-        best
     }
+    best
 }
 
 impl RayQuery for BruteForce {
@@ -68,10 +75,10 @@ impl RayQuery for BruteForce {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        run_query(mesh, ray, AllTriangles { mesh, any: false })
+        run_query(mesh, ray, AllTriangles::<false> { mesh })
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        run_query(mesh, ray, AllTriangles { mesh, any: true }).is_hit()
+        run_query(mesh, ray, AllTriangles::<true> { mesh }).is_hit()
     }
 }

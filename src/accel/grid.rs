@@ -4,12 +4,18 @@
 use alloc::vec::Vec;
 use glam::Vec3;
 
-use crate::accel::{run_query, test_prims, Aabb, RayQuery};
+use crate::accel::brute::test_all;
+use crate::accel::{run_query, test_refs, Aabb, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
 use crate::mesh::TriMesh;
-use crate::ray::{Hit, Ray, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE};
+use crate::ray::{Hit, Ray};
+use crate::triangle::packs::{TriangleLayout, TrianglePacks};
+use crate::triangle::{TriangleLoop, TriangleTest};
+
+/// Unit roundoff of f32 (2^-24), the unit of the walk's rounding errors.
+const U32: f32 = f32::EPSILON / 2.0;
 
 /// The grid's knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -20,6 +26,8 @@ pub struct GridParams {
     /// Insert a triangle only into the cells it really overlaps (separating-axis test) when its bounds
     /// span more than one cell in two or more axes; otherwise every cell of its bounds.
     pub exact_overlap: bool,
+    /// How the cells' triangles are stored for the test (packed copies or ids only).
+    pub layout: TriangleLayout,
 }
 
 impl GridParams {
@@ -28,16 +36,19 @@ impl GridParams {
     pub const DEFAULT: GridParams = GridParams {
         density: 2.0,
         exact_overlap: true,
+        layout: TriangleLayout::Packed,
     };
     /// Fewer cells (λ = 0.5): less memory and a faster build, slower rays.
     pub const COARSE: GridParams = GridParams {
         density: 0.5,
         exact_overlap: true,
+        layout: TriangleLayout::Packed,
     };
     /// More cells (λ = 8): faster rays on clustered scenes, more memory.
     pub const FINE: GridParams = GridParams {
         density: 8.0,
         exact_overlap: true,
+        layout: TriangleLayout::Packed,
     };
 }
 
@@ -51,11 +62,15 @@ impl Default for GridParams {
 ///
 /// # Guarantees
 /// - every non-degenerate triangle is listed in every cell it overlaps, where "overlaps" is tested
-///   against the cell enlarged by a margin (1/64 of a cell plus twice the triangle test's near-miss
-///   allowance), so neither rounding in the traversal nor the allowance can skip a triangle that the
-///   shared test would hit, for ray origins within ~4000 cells of the grid (docs/design.md);
-/// - each cell's list is sorted by primitive id;
-/// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at `refs.len()`.
+///   against the cell enlarged by a margin of 1/64 of a cell plus 16 f32 roundings of the grid's
+///   coordinates and of its extent; that covers the walk's rounding for ray origins within
+///   [`UniformGrid::near_reach`] of the grid, and farther rays are walked from a point at the
+///   grid's entry (docs/design.md, "Uniform grid"), so the walk never skips a triangle the exact
+///   test would hit;
+/// - each cell's list is sorted by primitive id; with the packed layout it starts at a multiple of
+///   4, and `refs` between two lists holds `Hit::INVALID_ID`;
+/// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at `refs.len()`;
+/// - `packs` holds the triangles of `refs` in its order (or nothing, for the indexed layout).
 #[derive(Debug)]
 pub struct UniformGrid {
     bounds: Aabb,
@@ -63,8 +78,16 @@ pub struct UniformGrid {
     cell_size: Vec3,
     inv_cell_size: Vec3,
     margin: Vec3,
+    /// The largest distance (per axis, from the ray origin to the farthest point of the box) at
+    /// which the margin covers the walk's rounding (docs/design.md).
+    near_reach: f32,
+    /// The smallest cell side: with `near_reach`, what decides how a far ray is walked.
+    min_cell: f32,
     offsets: Vec<u32>,
     refs: Vec<u32>,
+    /// Triangle references over all cells (`refs` less its padding).
+    references: usize,
+    packs: TrianglePacks,
 }
 
 /// What one query did, for the selector's deterministic cost model.
@@ -98,8 +121,12 @@ impl UniformGrid {
                 cell_size: Vec3::ZERO,
                 inv_cell_size: Vec3::ZERO,
                 margin: Vec3::ZERO,
+                near_reach: 0.0,
+                min_cell: 0.0,
                 offsets: Vec::new(),
                 refs: Vec::new(),
+                references: 0,
+                packs: TrianglePacks::default(),
             });
         }
         let (bounds, res) = layout(tight, live, params.density)?;
@@ -108,15 +135,25 @@ impl UniformGrid {
         let cell_size = (bounds.max - bounds.min) / resf;
         let inv_cell_size = resf / (bounds.max - bounds.min);
         let abs_scale = bounds.min.abs().max(bounds.max.abs()).max_element();
-        let margin = cell_size * (1.0 / 64.0) + Vec3::splat(abs_scale * 2.0 * NEAR_MISS_TOLERANCE);
+        let extent = (bounds.max - bounds.min).max_element();
+        // The walk's rounding moves a cell boundary by at most 4u·(D + 2A) (D the origin's distance,
+        // A the coordinates' magnitude); a margin of twice that covers it. 16u·A covers the A part,
+        // 16u·extent lets every origin within two extents of the grid qualify, and 1/64 of a cell
+        // extends that to 32768 cells.
+        let margin = cell_size * (1.0 / 64.0) + Vec3::splat(16.0 * U32 * (abs_scale + extent));
+        let near_reach = margin.min_element() / (8.0 * U32) - 2.0 * abs_scale;
         let mut grid = UniformGrid {
             bounds,
             res,
             cell_size,
             inv_cell_size,
             margin,
+            near_reach,
+            min_cell: cell_size.min_element(),
             offsets: Vec::new(),
             refs: Vec::new(),
+            references: 0,
+            packs: TrianglePacks::default(),
         };
 
         let geometry = grid.geometry();
@@ -176,11 +213,21 @@ impl UniformGrid {
                 }
             }
         }
-        // Inclusive prefix sums: counts[c] becomes the end of cell c's list.
-        let mut total: u64 = 0;
+        // Prefix sums: counts[c] becomes the end of cell c's list. With packed triangles each list
+        // starts on a block of four (the gap holds no triangle: id INVALID, NaN in the packs), so
+        // a cell's triangles fill whole blocks and no block serves two cells.
+        let align: u64 = if params.layout == TriangleLayout::Packed {
+            4
+        } else {
+            1
+        };
+        let (mut total, mut references): (u64, u64) = (0, 0);
         for n in counts.iter_mut().take(cells) {
+            // Aligned at every cell, so an empty cell's list is empty (not the gap before the next).
+            total = total.div_ceil(align) * align;
             total += u64::from(*n);
-            if overflow || total > u64::from(u32::MAX) {
+            references += u64::from(*n);
+            if overflow || total.div_ceil(align) * align > u64::from(u32::MAX) {
                 budget.free(counts);
                 budget.free(records);
                 return Err(BuildError::CapacityExceeded {
@@ -189,10 +236,12 @@ impl UniformGrid {
             }
             *n = total as u32;
         }
+        let total = total.div_ceil(align) * align;
         if let Some(end) = counts.get_mut(cells) {
             *end = total as u32;
         }
-        let mut refs = match budget.filled(total as usize, 0u32, "grid references") {
+        grid.references = references as usize;
+        let mut refs = match budget.filled(total as usize, Hit::INVALID_ID, "grid references") {
             Ok(r) => r,
             Err(e) => {
                 budget.free(counts);
@@ -236,8 +285,17 @@ impl UniformGrid {
             }
         }
         budget.free(records);
+        let packs = match TrianglePacks::build(mesh, &refs, params.layout, budget) {
+            Ok(p) => p,
+            Err(e) => {
+                budget.free(counts);
+                budget.free(refs);
+                return Err(e);
+            }
+        };
         grid.refs = refs;
         grid.offsets = counts;
+        grid.packs = packs;
         Ok(grid)
     }
 
@@ -253,18 +311,30 @@ impl UniformGrid {
 
     /// Number of triangle references over all cells.
     pub fn reference_count(&self) -> usize {
-        self.refs.len()
+        self.references
     }
 
-    /// Bytes the grid holds.
+    /// Bytes the grid holds (offsets, references and their triangle packs).
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.offsets) + bytes_of(&self.refs)
+        bytes_of(&self.offsets) + bytes_of(&self.refs) + self.packs.memory_bytes()
+    }
+
+    /// Bytes of the triangle packs alone (zero for the indexed layout).
+    pub fn pack_bytes(&self) -> usize {
+        self.packs.memory_bytes()
+    }
+
+    /// The largest distance of a ray origin from the grid (per axis, to the box's far side) that
+    /// the cells' margin covers; farther rays are walked from their entry point (docs/design.md).
+    pub fn near_reach(&self) -> f32 {
+        self.near_reach
     }
 
     /// Gives the grid's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.offsets);
         budget.free(self.refs);
+        self.packs.release(budget);
     }
 
     /// The closest hit, also counting the work done.
@@ -296,11 +366,15 @@ impl UniformGrid {
         }
     }
 
+    /// The part of `refs` that lists cell `index`'s triangles (empty for an index outside the grid).
     #[inline(always)]
-    fn cell_prims(&self, cell: usize) -> &[u32] {
+    fn cell_span(&self, index: i64) -> (usize, usize) {
+        let Ok(cell) = usize::try_from(index) else {
+            return (0, 0);
+        };
         let lo = self.offsets.get(cell).copied().unwrap_or(0) as usize;
         let hi = self.offsets.get(cell + 1).copied().unwrap_or(0) as usize;
-        self.refs.get(lo..hi).unwrap_or(&[])
+        (lo, hi.max(lo))
     }
 }
 
@@ -346,13 +420,25 @@ struct Walk<'a, const COUNT: bool, const ANY: bool> {
     work: &'a mut GridWork,
 }
 
-/// Whether a cell's triangles are all touched (loaded) before the first is tested, so that their
-/// cache misses overlap instead of following one another.
-const PREFETCH: bool = true;
+/// Origins farther than this many of the smallest cells from the grid are walked by testing every
+/// triangle: beyond it the f64 entry point of a far ray may be off its line by more than the margin.
+const FAR_WALK_CELLS: f32 = 1.099_511_6e12;
 
-/// 2^100: scales a direction whose components are all too small to invert in f32 into one that is
-/// not, without rounding (a power of two), so the DDA follows the same line.
-const TINY_DIRECTION_SCALE: f32 = 1.267_650_6e30;
+/// 16·2^-149: sixteen times the largest error of a subnormal `t`, per unit of direction. Directions
+/// longer than `margin / SUBNORMAL_T_ERROR` are walked scaled (see the walk).
+const SUBNORMAL_T_ERROR: f64 = 2.242_077_542_919_707_3e-44;
+
+/// `d` times the power of two that brings its largest component `largest` (finite, not zero) into
+/// `[1, 2)`: the same line, with a direction whose t keeps f32's precision. In two steps, so each
+/// factor is a normal f32.
+fn unit_scaled(d: Vec3, largest: f32) -> Vec3 {
+    let e = ((largest.to_bits() >> 23) & 0xff) as i32;
+    // A subnormal largest component (biased exponent 0) needs the factor for 2^-126 and more.
+    let k = 127 - e.max(1) + if e == 0 { 23 } else { 0 };
+    let (k1, k2) = (k / 2, k - k / 2);
+    let pow2 = |k: i32| f32::from_bits(((k + 127) as u32) << 23);
+    d * pow2(k1) * pow2(k2)
+}
 
 impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
     type Output = Hit;
@@ -365,23 +451,46 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         if grid.offsets.is_empty() {
             return best;
         }
-        let (o, mut d) = (r.org, r.dir);
+        let (mut o, mut d) = (r.org, r.dir);
         let (mut t0, mut t1) = (r.tmin, r.tmax);
-        // A direction with a non-zero component too small to invert (below ~3e-39) still moves along
-        // that axis over the f32 range of t, and one small against the scene's coordinates can make
-        // the t of crossing the scene overflow. Walk the same line with a scaled direction (a power
-        // of two: no rounding), over the whole box and without the early exit, whose t would be in
-        // the wrong units. Only when the scaled direction stays finite (|d| ≤ 2^27); above that a
-        // component too small to invert moves the ray by less than 1e-46 of the scene while it
-        // crosses it, far inside the cells' margin, so treating it as parallel is exact enough.
         let (lo, hi) = (grid.bounds.min, grid.bounds.max);
+        let mut early_exit = true;
+        // An origin farther than the margin covers: walk the same line from where it enters the
+        // box (found in f64, rounded to f32: off the line by far less than the margin), over the
+        // whole box and without the early exit, whose t would be in the wrong frame. Beyond 2^40
+        // cells even the f64 entry point may be off by more than the margin: test every triangle.
+        let reach = (lo - o).abs().max((hi - o).abs()).max_element();
+        if !(reach <= grid.near_reach) {
+            if !(reach <= FAR_WALK_CELLS * grid.min_cell) {
+                return test_all::<T, ANY>(&test, mesh);
+            }
+            match entry_point(o, d, lo, hi) {
+                Some(p) => o = p,
+                None => return best,
+            }
+            early_exit = false;
+            t0 = -f32::INFINITY;
+            t1 = f32::INFINITY;
+        }
+        // Directions whose t would leave the range where f32 keeps 24 bits: a non-zero component too
+        // small to invert (below ~3e-39) still moves along that axis over the f32 range of t; one
+        // small against the scene's coordinates can make the t of crossing the scene overflow; one
+        // so large that t becomes subnormal loses the precision the margin counts on (a subnormal
+        // t is off by up to 2^-149 in absolute terms, 2^-149·|d| in space). Walk the same line with
+        // the direction scaled by a power of two (no rounding) to a largest component in [1, 2),
+        // over the whole box and without the early exit, whose t would be in other units. A
+        // component that is still too small to invert is below 2^-126 of the largest, so across
+        // the box the ray moves along it by less than 2^-126 of the box's extent, far inside the
+        // box's padding and the cells' margin: treating that axis as parallel still covers the line.
         let largest = d.abs().max_element();
-        let reach = lo.abs().max(hi.abs()).max_element() + o.abs().max_element();
+        let magnitude = lo.abs().max(hi.abs()).max_element() + o.abs().max_element();
         let uninvertible = (0..3).any(|a| d[a] != 0.0 && !(1.0 / d[a]).is_finite());
-        let may_overflow = largest * (f32::MAX / 1024.0) < reach;
-        let early_exit = !((uninvertible || may_overflow) && largest <= 134_217_728.0);
-        if !early_exit {
-            d *= TINY_DIRECTION_SCALE;
+        let may_overflow = largest * (f32::MAX / 1024.0) < magnitude;
+        let subnormal_t =
+            f64::from(largest) * SUBNORMAL_T_ERROR > f64::from(grid.margin.min_element());
+        if uninvertible || may_overflow || subnormal_t {
+            early_exit = false;
+            d = unit_scaled(d, largest);
             t0 = -f32::INFINITY;
             t1 = f32::INFINITY;
         }
@@ -469,22 +578,16 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             let axis = axis & 3;
             let t_axis = t_next[axis];
             let t_exit = t_axis.min(t1);
-            let prims = usize::try_from(index).map_or(&[][..], |i| grid.cell_prims(i));
+            let (first, last) = grid.cell_span(index);
             if COUNT {
                 work.cells += 1;
-                work.tests += prims.len() as u32;
+                // Real triangles only, not the padding of the last block.
+                let listed = grid.refs.get(first..last).unwrap_or(&[]);
+                work.tests += listed.iter().filter(|&&p| p != Hit::INVALID_ID).count() as u32;
             }
-            if PREFETCH {
-                // Touch every triangle of the cell first so that their cache misses overlap.
-                let mut acc = 0.0f32;
-                for &prim in prims {
-                    if let Some(tri) = mesh.triangle(prim) {
-                        acc += tri[0].x;
-                    }
-                }
-                core::hint::black_box(acc);
-            }
-            if let Some(h) = test_prims::<T, ANY>(&test, mesh, prims, &mut best) {
+            if let Some(h) =
+                test_refs::<T, ANY>(&test, mesh, &grid.packs, &grid.refs, first, last, &mut best)
+            {
                 return h;
             }
             // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit
@@ -518,6 +621,31 @@ impl UniformGrid {
     }
 }
 
+/// Where the line `o + t·d` enters the box `[lo, hi]`, computed in f64 and rounded to f32, or
+/// `None` when the line misses the box. For origins at most 2^40 cells away the f64 error is below
+/// 1/2048 of a cell, less than the box's padding, so a line that meets a triangle is never refused.
+fn entry_point(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<Vec3> {
+    let (mut enter, mut leave) = (f64::NEG_INFINITY, f64::INFINITY);
+    for a in 0..3 {
+        let (oa, da) = (f64::from(o[a]), f64::from(d[a]));
+        if da == 0.0 {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+            continue;
+        }
+        let ta = (f64::from(lo[a]) - oa) / da;
+        let tb = (f64::from(hi[a]) - oa) / da;
+        enter = enter.max(ta.min(tb));
+        leave = leave.min(ta.max(tb));
+    }
+    if !(enter <= leave) {
+        return None;
+    }
+    let p = |a: usize| (f64::from(o[a]) + enter * f64::from(d[a])) as f32;
+    Some(Vec3::new(p(0), p(1), p(2)))
+}
+
 /// What the build needs of the grid's shape, copied out so the fill pass can borrow `refs` mutably.
 struct Geometry {
     min: Vec3,
@@ -537,10 +665,10 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
     let ext = tight.extent();
     let max_ext = ext.max_element();
     let abs_scale = tight.min.abs().max(tight.max.abs()).max_element();
-    // Pad so that triangles on the box faces lie strictly inside and flat scenes get a thin slab.
-    // The pad also covers the triangle test's near-miss allowance, so a ray that grazes a triangle on
-    // the box's face is not clipped away.
-    let pad = max_ext * (1.0 / 1024.0) + abs_scale * 2.0 * NEAR_MISS_TOLERANCE + f32::MIN_POSITIVE;
+    // Pad so that triangles on the box faces lie strictly inside, by more than the walk's rounding
+    // at the box's faces (16 roundings of the coordinates) and the far walk's entry point (1/2048
+    // of a cell), and flat scenes get a thin slab.
+    let pad = max_ext * (1.0 / 1024.0) + abs_scale * (16.0 * U32) + f32::MIN_POSITIVE;
     let bounds = Aabb {
         min: tight.min - Vec3::splat(pad),
         max: tight.max + Vec3::splat(pad),

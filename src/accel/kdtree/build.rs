@@ -10,10 +10,11 @@ use glam::Vec3;
 
 use super::node::{KdNode, MAX_NODE_FIELD};
 use super::{KdTreeParams, MAX_DEPTH};
-use crate::accel::Aabb;
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
+use crate::ray::{Aabb, Hit};
+use crate::triangle::packs::TriangleLayout;
 
 /// A split event: the position (as order-preserving bits) in the high word, the kind in the top two
 /// bits of the low word and the triangle in the other 30, so that sorting the raw `u64` orders events
@@ -82,9 +83,12 @@ fn push_events(lists: &mut [Vec<Event>; 3], b: &Aabb, p: u32) {
 /// What the builder returns.
 pub(super) struct Built {
     pub nodes: Vec<KdNode>,
+    /// The leaves' triangle ids (with `Hit::INVALID_ID` padding before block-aligned leaves).
     pub prims: Vec<u32>,
     pub depth: u32,
     pub leaves: u32,
+    /// Triangle references held by the leaves (`prims` less its padding).
+    pub references: usize,
 }
 
 /// The chosen split of a node.
@@ -123,6 +127,8 @@ struct Builder<'a> {
     max_depth: u32,
     depth: u32,
     leaves: u32,
+    /// Triangle references held by the leaves made so far.
+    references: usize,
     /// References held by the leaves made so far plus the nodes still to be built.
     refs: usize,
     refs_limit: usize,
@@ -169,6 +175,7 @@ pub(super) fn build(
         max_depth,
         depth: 0,
         leaves: 0,
+        references: 0,
         refs: live,
         refs_limit: refs_limit.max(live),
     };
@@ -186,6 +193,7 @@ pub(super) fn build(
         merged,
         depth,
         leaves,
+        references,
         ..
     } = b;
     budget.free(side);
@@ -200,6 +208,7 @@ pub(super) fn build(
             prims,
             depth,
             leaves,
+            references,
         }),
         Err(e) => {
             budget.free(nodes);
@@ -342,34 +351,38 @@ impl Builder<'_> {
     fn leaf(&mut self, index: usize, start: Starts) -> Result<(), BuildError> {
         self.leaves += 1;
         let list = tail(&self.stack[0], start[0]);
-        let mut members = list.iter().filter(|&&e| kind(e) != END).map(|&e| prim(e));
+        let members = list.iter().filter(|&&e| kind(e) != END).map(|&e| prim(e));
         let count = list.iter().filter(|&&e| kind(e) != END).count();
+        // With packed triangles a leaf starts on a block of four, so its triangles fill whole
+        // blocks (the gap holds no triangle: id INVALID, NaN in the packs).
+        let pad = if self.params.layout == TriangleLayout::Packed && count > 0 {
+            self.prims.len().next_multiple_of(4) - self.prims.len()
+        } else {
+            0
+        };
+        let offset = self.prims.len() + pad;
         let result = if count > MAX_NODE_FIELD as usize {
             Err(BuildError::CapacityExceeded {
                 what: "kd-tree leaf size (at most 2^30)",
             })
-        } else if count == 1 {
-            self.nodes[index] = KdNode::leaf(1, members.next().unwrap_or(0));
-            Ok(())
+        } else if offset + count > u32::MAX as usize {
+            Err(BuildError::CapacityExceeded {
+                what: "kd-tree references (at most 2^32)",
+            })
         } else {
-            let offset = self.prims.len();
-            if offset + count > u32::MAX as usize {
-                Err(BuildError::CapacityExceeded {
-                    what: "kd-tree references (at most 2^32)",
-                })
-            } else {
-                let mut r = Ok(());
-                for p in members {
-                    r = self
-                        .budget
-                        .push(&mut self.prims, p, "kd-tree leaf references");
-                    if r.is_err() {
-                        break;
-                    }
+            let padding = core::iter::repeat(Hit::INVALID_ID).take(pad);
+            let mut r = Ok(());
+            for p in padding.chain(members) {
+                r = self
+                    .budget
+                    .push(&mut self.prims, p, "kd-tree leaf references");
+                if r.is_err() {
+                    break;
                 }
-                self.nodes[index] = KdNode::leaf(count as u32, offset as u32);
-                r
             }
+            self.references += count;
+            self.nodes[index] = KdNode::leaf(count as u32, offset as u32);
+            r
         };
         for (list, &s) in self.stack.iter_mut().zip(&start) {
             list.truncate(s);
@@ -396,7 +409,7 @@ impl Builder<'_> {
             ct: f64::from(p.traversal_cost),
             ci: f64::from(p.intersection_cost),
             keep: 1.0 - f64::from(p.empty_bonus),
-            best_cost: f64::from(p.intersection_cost) * n as f64,
+            best_cost: f64::from(p.intersection_cost) * blocks(n),
             best: None,
         };
         // One copy of the sweep per axis, so the box arithmetic has fixed slots.
@@ -575,6 +588,13 @@ impl Builder<'_> {
     }
 }
 
+/// The test cost of a leaf of `n` triangles in units of one block test: the list test takes them
+/// four at a time (a leaf's list starts on a block), so one to four cost the same.
+#[inline(always)]
+fn blocks(n: usize) -> f64 {
+    n.div_ceil(4) as f64
+}
+
 /// The SAH sweep of one node: its constants and the best split so far.
 struct Sweep {
     n: usize,
@@ -640,7 +660,7 @@ impl Sweep {
         let (pl, pr) = (area(le) / self.sa, area(re) / self.sa);
         let (ct, ci, keep) = (self.ct, self.ci, self.keep);
         let cost = |l: usize, r: usize| {
-            let c = ct + ci * (pl * l as f64 + pr * r as f64);
+            let c = ct + ci * (pl * blocks(l) + pr * blocks(r));
             if l == 0 || r == 0 {
                 c * keep
             } else {

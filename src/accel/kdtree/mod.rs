@@ -8,6 +8,7 @@ use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
+use crate::triangle::packs::{TriangleLayout, TrianglePacks};
 
 mod build;
 pub mod node;
@@ -38,6 +39,8 @@ pub struct KdTreeParams {
     /// Bound on leaf references per triangle from clipped straddlers: once the tree would hold more,
     /// nodes stop splitting. At least 1.
     pub max_references_per_triangle: f32,
+    /// How the leaves' triangles are stored for the test (packed copies or ids only).
+    pub layout: TriangleLayout,
 }
 
 impl KdTreeParams {
@@ -47,11 +50,12 @@ impl KdTreeParams {
     /// one triangle need no split search.
     pub const DEFAULT: KdTreeParams = KdTreeParams {
         traversal_cost: 1.0,
-        intersection_cost: 4.0,
+        intersection_cost: 2.0,
         empty_bonus: 0.8,
         max_depth: 0,
         max_leaf_prims: 1,
         max_references_per_triangle: 16.0,
+        layout: TriangleLayout::Packed,
     };
 
     fn validate(&self) -> Result<(), BuildError> {
@@ -98,9 +102,12 @@ pub struct KdWork {
 ///
 /// # Guarantees
 /// - every non-degenerate triangle is referenced by every leaf whose closed box meets it (clipping
-///   is rounded outward), so the traversal, which widens each ray's split intervals by the triangle
-///   test's near-miss allowance plus its own rounding, never skips a triangle the shared test would
-///   hit: answers are bit-identical to brute force;
+///   is rounded outward), so the traversal, which widens each ray's split intervals by its own
+///   rounding, never skips a triangle the exact test would hit: answers are bit-identical to brute
+///   force;
+/// - every leaf's triangles are `prims[offset..offset + count]` (with the packed layout `offset` is a
+///   multiple of 4 and the gaps hold `Hit::INVALID_ID`), and `packs` holds the triangles of `prims`
+///   in its order (or nothing, for the indexed layout);
 /// - depth ≤ [`MAX_DEPTH`], so the fixed traversal stack never overflows;
 /// - nodes and references fit their 30- and 32-bit fields (`CapacityExceeded` otherwise).
 #[derive(Debug)]
@@ -108,13 +115,9 @@ pub struct KdTree {
     bounds: Aabb,
     nodes: Vec<KdNode>,
     prims: Vec<u32>,
+    packs: TrianglePacks,
     depth: u32,
     leaves: u32,
-    /// The scene's largest coordinate magnitude, for the per-ray tolerance.
-    coord_bound: f32,
-    /// An upper bound of the near-miss allowance of any triangle (1/16 of its longest edge), so
-    /// the per-ray tolerance stays small for scenes far from the origin.
-    near_miss_cap: f32,
     references: usize,
 }
 
@@ -129,18 +132,6 @@ impl KdTree {
         params.validate()?;
         let bounds = mesh.bounds();
         let live = mesh.len() - mesh.degenerate_count();
-        let mut longest = 0.0f64;
-        for (i, t) in mesh.triangles().iter().enumerate() {
-            if !mesh.is_degenerate(i as u32) {
-                let q = [t[0].as_dvec3(), t[1].as_dvec3(), t[2].as_dvec3()];
-                let e = (q[1] - q[0])
-                    .length_squared()
-                    .max((q[2] - q[1]).length_squared())
-                    .max((q[0] - q[2]).length_squared());
-                longest = longest.max(e);
-            }
-        }
-        let longest = crate::math::sqrt64(longest);
         let root = if live == 0 { Aabb::EMPTY } else { bounds };
         let built = if live == 0 {
             let mut nodes = budget.vec(1, "kd-tree nodes")?;
@@ -150,25 +141,27 @@ impl KdTree {
                 prims: Vec::new(),
                 depth: 0,
                 leaves: 1,
+                references: 0,
             }
         } else {
             build::build(mesh, params, root, budget)?
         };
-        let singles = built
-            .nodes
-            .iter()
-            .filter(|n| n.is_leaf() && n.count() == 1)
-            .count();
+        let packs = match TrianglePacks::build(mesh, &built.prims, params.layout, budget) {
+            Ok(p) => p,
+            Err(e) => {
+                budget.free(built.nodes);
+                budget.free(built.prims);
+                return Err(e);
+            }
+        };
         Ok(KdTree {
             bounds: root,
-            references: built.prims.len() + singles,
             nodes: built.nodes,
             prims: built.prims,
+            packs,
             depth: built.depth,
             leaves: built.leaves,
-            coord_bound: mesh.coordinate_bound(),
-            // Twice 1/16 of the longest edge, rounded up generously.
-            near_miss_cap: (longest / 8.0 * (1.0 + 1e-6)) as f32,
+            references: built.references,
         })
     }
 
@@ -192,15 +185,21 @@ impl KdTree {
         self.references
     }
 
-    /// Bytes the tree holds.
+    /// Bytes the tree holds (nodes, references and their triangle packs).
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.nodes) + bytes_of(&self.prims)
+        bytes_of(&self.nodes) + bytes_of(&self.prims) + self.packs.memory_bytes()
+    }
+
+    /// Bytes of the triangle packs alone (zero for the indexed layout).
+    pub fn pack_bytes(&self) -> usize {
+        self.packs.memory_bytes()
     }
 
     /// Gives the tree's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.nodes);
         budget.free(self.prims);
+        self.packs.release(budget);
     }
 
     /// The closest hit, also counting the work done.

@@ -5,8 +5,8 @@
 /// - interior: `a` = the split position's f32 bits; `b` = `above << 2 | axis` (axis 0..=2), where the
 ///   child below the plane is the next node in the array (depth-first order) and `above` is the index
 ///   of the child above it;
-/// - leaf: `b` = `count << 2 | 3`; `a` = the triangle itself when `count == 1`, otherwise the offset
-///   of the leaf's `count` triangles in the tree's primitive array.
+/// - leaf: `b` = `count << 2 | 3`; `a` = the offset of the leaf's `count` triangles in the tree's
+///   primitive array.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct KdNode {
@@ -30,12 +30,12 @@ impl KdNode {
         }
     }
 
-    /// A leaf of `count` triangles: the triangle itself when `count == 1`, else their offset in the
-    /// primitive array (`count <= MAX_NODE_FIELD`, checked by the builder).
+    /// A leaf of `count` triangles at `offset` in the primitive array (`count <= MAX_NODE_FIELD`,
+    /// checked by the builder).
     #[inline]
-    pub fn leaf(count: u32, prim_or_offset: u32) -> KdNode {
+    pub fn leaf(count: u32, offset: u32) -> KdNode {
         KdNode {
-            a: prim_or_offset,
+            a: offset,
             b: (count << 2) | 3,
         }
     }
@@ -70,9 +70,9 @@ impl KdNode {
         self.b >> 2
     }
 
-    /// The single triangle (count 1) or the offset of a leaf's triangles.
+    /// The offset of a leaf's triangles in the primitive array.
     #[inline(always)]
-    pub fn prim_or_offset(self) -> u32 {
+    pub fn offset(self) -> u32 {
         self.a
     }
 }
@@ -88,7 +88,7 @@ mod tests {
         assert_eq!((n.axis(), n.split(), n.above()), (2, -3.5, MAX_NODE_FIELD));
         let l = KdNode::leaf(MAX_NODE_FIELD, 77);
         assert!(l.is_leaf());
-        assert_eq!((l.count(), l.prim_or_offset()), (MAX_NODE_FIELD, 77));
+        assert_eq!((l.count(), l.offset()), (MAX_NODE_FIELD, 77));
         assert!(KdNode::leaf(0, 0).is_leaf());
     }
 }

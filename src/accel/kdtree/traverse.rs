@@ -1,21 +1,19 @@
 //! Front-to-back traversal with a fixed on-stack stack (Havran's TA_B_rec family), widened so that
-//! rounding and the triangle test's near-miss allowance can never hide a hit.
+//! the traversal's own rounding can never hide a hit.
 //!
-//! Why the widening is enough: a hit at `t` (the ray's point `P`) comes from a triangle with a point
-//! `Q` within the near-miss allowance `tol` of `P`, and the triangle is referenced by a leaf whose
-//! closed box holds `Q`. Each node's interval is widened by `tol` in space (`tol·|1/d_a|` in `t`) plus
-//! the rounding of its own `t` (8 ulps of `t`), so every node whose box lies within `tol` of `P` has
-//! `t` in its interval. A subtree is skipped only when the best hit so far is strictly before its
-//! widened entry, so a nearer hit, or an equally near one with a lower id, is never skipped.
-
-use glam::Vec3;
+//! Why the widening is enough: a hit at exact `t` is a point `P` of the ray inside a triangle, and
+//! the triangle is referenced by a leaf whose closed box holds `P` (clipping rounds outward). Each
+//! split's `t = (s − o)·(1/d)` is computed with a relative error below 3 f32 roundings, and the hit's
+//! reported `t` is within half an ulp of the exact one; widening every node's interval by 8 ulps of
+//! its ends therefore keeps the reported `t` inside the interval of every node on the way to that
+//! leaf. A subtree is skipped only when the best hit so far is strictly before its widened entry, so
+//! a nearer hit, or an equally near one with a lower id, is never skipped.
 
 use super::{KdTree, KdWork, MAX_DEPTH};
-use crate::accel::test_prims;
+use crate::accel::test_refs;
 use crate::mesh::TriMesh;
-use crate::ray::{
-    Hit, TriangleLoop, TriangleTest, NEAR_MISS_TOLERANCE, NEAR_MISS_TOLERANCE_PER_DISTANCE,
-};
+use crate::ray::Hit;
+use crate::triangle::{TriangleLoop, TriangleTest};
 
 /// Room for one pending far child per level of the deepest tree.
 const STACK_SIZE: usize = MAX_DEPTH as usize + 4;
@@ -37,18 +35,6 @@ pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
     pub work: &'a mut KdWork,
 }
 
-/// The per-ray spatial tolerance: twice the largest near-miss allowance any triangle can grant this
-/// ray (see `ray::near_miss`), rounded up.
-#[inline]
-fn tolerance(tree: &KdTree, org: Vec3) -> f32 {
-    let b = f64::from(tree.coord_bound);
-    let reach = b + f64::from(org.abs().max_element());
-    let nm = 2.0
-        * (f64::from(NEAR_MISS_TOLERANCE) * b
-            + f64::from(NEAR_MISS_TOLERANCE_PER_DISTANCE) * reach);
-    (nm.min(f64::from(tree.near_miss_cap)) * (1.0 + 1e-6)) as f32
-}
-
 impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
     type Output = Hit;
 
@@ -61,14 +47,13 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             return best;
         }
         let (o, d) = (r.org, r.dir);
-        let tol = tolerance(tree, o);
         let mut inv = [0.0f32; 3];
-        let mut widen = [0.0f32; 3];
         let (mut t0, mut t1) = (r.tmin, r.tmax);
         let (lo, hi) = (tree.bounds.min, tree.bounds.max);
         for a in 0..3 {
             if d[a] == 0.0 {
-                if o[a] < lo[a] - tol || o[a] > hi[a] + tol {
+                // The box is the triangles' exact bounds: a ray outside its slab misses them all.
+                if o[a] < lo[a] || o[a] > hi[a] {
                     return best;
                 }
                 continue;
@@ -76,12 +61,11 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             // `1/d` may be infinite for a denormal component; the intervals then become NaN or
             // infinite and the min/max below leave them unconstrained: slower, never wrong.
             inv[a] = 1.0 / d[a];
-            widen[a] = tol * inv[a].abs();
             let ta = (lo[a] - o[a]) * inv[a];
             let tb = (hi[a] - o[a]) * inv[a];
             let (near, far) = (ta.min(tb), ta.max(tb));
-            t0 = t0.max(near - widen[a] - T_SLACK * near.abs());
-            t1 = t1.min(far + widen[a] + T_SLACK * far.abs());
+            t0 = t0.max(near - T_SLACK * near.abs());
+            t1 = t1.min(far + T_SLACK * far.abs());
         }
         if !(t0 <= t1) {
             return best;
@@ -110,7 +94,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let (near, far, near_t1, far_t0);
                 if d[a] == 0.0 {
                     // The ray never crosses the plane: the side holding the origin, and the other
-                    // one too when the origin is within the tolerance of the plane.
+                    // one too when the ray lies in the plane (both closed boxes hold it).
                     let on_below = o[a] < s;
                     (near, far) = if on_below {
                         (below, above)
@@ -118,14 +102,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                         (above, below)
                     };
                     near_t1 = t1;
-                    far_t0 = if (o[a] - s).abs() <= tol {
-                        t0
-                    } else {
-                        f32::INFINITY
-                    };
+                    far_t0 = if o[a] == s { t0 } else { f32::INFINITY };
                 } else {
                     let ts = (s - o[a]) * inv[a];
-                    let w = widen[a] + T_SLACK * ts.abs();
+                    let w = T_SLACK * ts.abs();
                     (near, far) = if d[a] > 0.0 {
                         (below, above)
                     } else {
@@ -159,19 +139,21 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                     continue;
                 }
             } else {
-                let count = node.count();
-                let one = [node.prim_or_offset()];
-                let prims: &[u32] = if count == 1 {
-                    &one
-                } else {
-                    let off = node.prim_or_offset() as usize;
-                    tree.prims.get(off..off + count as usize).unwrap_or(&[])
-                };
+                let start = node.offset() as usize;
+                let end = start + node.count() as usize;
                 if COUNT {
                     work.leaves += 1;
-                    work.tests += prims.len() as u32;
+                    work.tests += node.count();
                 }
-                if let Some(h) = test_prims::<T, ANY>(&test, mesh, prims, &mut best) {
+                if let Some(h) = test_refs::<T, ANY>(
+                    &test,
+                    mesh,
+                    &tree.packs,
+                    &tree.prims,
+                    start,
+                    end,
+                    &mut best,
+                ) {
                     return h;
                 }
             }

@@ -1,0 +1,127 @@
+//! The four-wide f32 filter: rejects triangles whose edge functions certainly have mixed signs.
+//!
+//! It computes the same edge functions as the f64 stage, in f32 and four triangles at a time, and a
+//! bound on their error that holds for any triangle and ray (derived in docs/design.md): with
+//! `u = 2^-24`, `S` the largest sheared `|x|, |y|` and `Z` the largest translated `|z|` of a
+//! triangle's vertices, each sheared coordinate is within `e = u·(2S + 4Z) + 2^-148` of its exact
+//! value and each edge function within `E = S·(4u·S + 4e) + 2e² + 2^-145`. `S` is the lateral
+//! reach of the triangle around the ray and `Z` its distance along it, so `E` grows with the
+//! distance but stays small against a triangle the ray misses by more than a few millionths of that
+//! distance. A lane is rejected only when one edge function is above `E` and another below `−E`: then
+//! the exact ones have mixed signs, and the exact test misses.
+//!
+//! The bound needs every value to stay finite; [`super::PreparedRay::for_scene`] turns the filter
+//! off (every lane survives) when coordinates or the origin reach 2^60. Below that no real triangle
+//! gives a NaN, so a lane whose edge function is NaN is an unused one (NaN coordinates, the padding
+//! of block-aligned lists) and is rejected too.
+
+use glam::Vec3;
+
+use super::lanes::Lanes;
+
+/// Four triangles side by side (structure of arrays): `v[3·i + k][lane]` is coordinate `k` of
+/// vertex `i` of the triangle in `lane`, in the order `a.x, a.y, a.z, b.x, …, c.z`. 144 bytes.
+/// An unused lane holds NaN, which the filter rejects.
+#[repr(C, align(16))]
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Block4 {
+    /// The nine coordinates of four triangles.
+    pub v: [[f32; 4]; 9],
+}
+
+impl Default for Block4 {
+    /// Four unused lanes.
+    fn default() -> Self {
+        Block4 {
+            v: [[f32::NAN; 4]; 9],
+        }
+    }
+}
+
+impl Block4 {
+    /// Puts triangle `tri` in lane `lane` (0..4; other values are ignored).
+    #[inline(always)]
+    pub fn set(&mut self, lane: usize, tri: &[Vec3; 3]) {
+        for (i, p) in tri.iter().enumerate() {
+            for (k, &x) in p.to_array().iter().enumerate() {
+                if let Some(slot) = self.v[3 * i + k].get_mut(lane) {
+                    *slot = x;
+                }
+            }
+        }
+    }
+
+    /// The triangle in lane `lane` (`lane & 3`).
+    #[inline(always)]
+    pub fn get(&self, lane: usize) -> [Vec3; 3] {
+        let l = lane & 3;
+        let c = |k: usize| self.v[k][l];
+        [
+            Vec3::new(c(0), c(1), c(2)),
+            Vec3::new(c(3), c(4), c(5)),
+            Vec3::new(c(6), c(7), c(8)),
+        ]
+    }
+}
+
+/// Unit roundoff of f32 (2^-24).
+const U32: f32 = f32::EPSILON / 2.0;
+/// Relative slack on the bound's factors, covering the rounding of its own arithmetic (at most
+/// seven operations on non-negative values: 7·2^-24 < 2^-18).
+const SLACK32: f32 = 1.0 + 1.0 / 262_144.0;
+/// At least 2^-148 (three subnormal units): what underflow can add to a sheared coordinate.
+const COORD_FLOOR: f32 = 4.2e-45;
+/// At least 2^-145 (21 subnormal units): what underflow can add to an edge function and to the
+/// bound's arithmetic.
+const EDGE_FLOOR: f32 = 3e-44;
+
+/// The lanes of `block` the exact test might hit, for a ray from `org` with shear `sx, sy`
+/// (bit `k` for lane `k`, of four).
+#[inline(always)]
+pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
+    org: Vec3,
+    sx: f32,
+    sy: f32,
+    block: &Block4,
+) -> u32 {
+    let kx = if SWAP { (KZ + 2) % 3 } else { (KZ + 1) % 3 };
+    let ky = if SWAP { (KZ + 1) % 3 } else { (KZ + 2) % 3 };
+    let o = org.to_array();
+    let (ox, oy, oz) = (L::splat(o[kx]), L::splat(o[ky]), L::splat(o[KZ]));
+    let (sx, sy) = (L::splat(sx), L::splat(sy));
+    let vertex = |i: usize| {
+        let v = &block.v;
+        let z = L::load(&v[3 * i + KZ]).sub(oz);
+        let x = L::load(&v[3 * i + kx]).sub(ox).sub(sx.mul(z));
+        let y = L::load(&v[3 * i + ky]).sub(oy).sub(sy.mul(z));
+        (x, y, z)
+    };
+    let (ax, ay, az) = vertex(0);
+    let (bx, by, bz) = vertex(1);
+    let (cx, cy, cz) = vertex(2);
+    let u = cx.mul(by).sub(cy.mul(bx));
+    let v = ax.mul(cy).sub(ay.mul(cx));
+    let w = bx.mul(ay).sub(by.mul(ax));
+    let s = ax
+        .abs()
+        .max(ay.abs())
+        .max(bx.abs())
+        .max(by.abs())
+        .max(cx.abs().max(cy.abs()));
+    let z = az.abs().max(bz.abs()).max(cz.abs());
+    let four = L::splat(4.0);
+    let e = s
+        .add(s)
+        .add(four.mul(z))
+        .mul(L::splat(U32 * SLACK32))
+        .add(L::splat(COORD_FLOOR));
+    let bound = s
+        .mul(L::splat(4.0 * U32 * SLACK32).mul(s).add(four.mul(e)))
+        .add(L::splat(2.0).mul(e.mul(e)))
+        .mul(L::splat(SLACK32))
+        .add(L::splat(EDGE_FLOOR));
+    let low = bound.neg();
+    let pos = L::or(L::or(u.gt(bound), v.gt(bound)), w.gt(bound));
+    let neg = L::or(L::or(u.lt(low), v.lt(low)), w.lt(low));
+    L::bits(L::used(u)) & !L::bits(L::and(pos, neg))
+}

@@ -1,0 +1,286 @@
+//! Four f32 lanes: the few operations the filter needs, on SSE2 (x86, x86-64), NEON (AArch64) or
+//! plain arrays elsewhere. Every implementation performs the same IEEE operations lane by lane (no
+//! fused multiply-add), so all three give the same bits for the same inputs without NaN.
+
+/// Four f32 lanes and their comparison masks.
+pub(crate) trait Lanes: Copy {
+    /// The result of a lane-wise comparison.
+    type Mask: Copy;
+    fn splat(x: f32) -> Self;
+    fn load(v: &[f32; 4]) -> Self;
+    fn add(self, o: Self) -> Self;
+    fn sub(self, o: Self) -> Self;
+    fn mul(self, o: Self) -> Self;
+    /// The larger of each pair (inputs are never NaN where the filter uses it).
+    fn max(self, o: Self) -> Self;
+    fn abs(self) -> Self;
+    fn neg(self) -> Self;
+    fn gt(self, o: Self) -> Self::Mask;
+    fn lt(self, o: Self) -> Self::Mask;
+    /// Set where the lane is not NaN.
+    fn used(self) -> Self::Mask;
+    fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
+    /// Bit `k` set where lane `k` of the mask is set.
+    fn bits(m: Self::Mask) -> u32;
+}
+
+/// Plain arrays: the reference the vector versions are tested against, and the version for targets
+/// without SSE2 or NEON (hence unused in some builds).
+#[allow(dead_code)]
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Portable([f32; 4]);
+
+#[allow(dead_code)]
+impl Portable {
+    #[inline(always)]
+    fn map2(self, o: Self, f: impl Fn(f32, f32) -> f32) -> Self {
+        Portable(core::array::from_fn(|k| f(self.0[k], o.0[k])))
+    }
+
+    #[inline(always)]
+    fn cmp(self, o: Self, f: impl Fn(f32, f32) -> bool) -> u32 {
+        (0..4).fold(0, |m, k| m | (u32::from(f(self.0[k], o.0[k])) << k))
+    }
+}
+
+impl Lanes for Portable {
+    type Mask = u32;
+    #[inline(always)]
+    fn splat(x: f32) -> Self {
+        Portable([x; 4])
+    }
+    #[inline(always)]
+    fn load(v: &[f32; 4]) -> Self {
+        Portable(*v)
+    }
+    #[inline(always)]
+    fn add(self, o: Self) -> Self {
+        self.map2(o, |a, b| a + b)
+    }
+    #[inline(always)]
+    fn sub(self, o: Self) -> Self {
+        self.map2(o, |a, b| a - b)
+    }
+    #[inline(always)]
+    fn mul(self, o: Self) -> Self {
+        self.map2(o, |a, b| a * b)
+    }
+    #[inline(always)]
+    fn max(self, o: Self) -> Self {
+        self.map2(o, |a, b| if a > b { a } else { b })
+    }
+    #[inline(always)]
+    fn abs(self) -> Self {
+        Portable(self.0.map(|a| f32::from_bits(a.to_bits() & 0x7fff_ffff)))
+    }
+    #[inline(always)]
+    fn neg(self) -> Self {
+        Portable(self.0.map(|a| -a))
+    }
+    #[inline(always)]
+    fn gt(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| a > b)
+    }
+    #[inline(always)]
+    fn lt(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| a < b)
+    }
+    #[inline(always)]
+    fn used(self) -> u32 {
+        self.cmp(self, |a, b| a == b)
+    }
+
+    #[inline(always)]
+    fn or(a: u32, b: u32) -> u32 {
+        a | b
+    }
+    #[inline(always)]
+    fn and(a: u32, b: u32) -> u32 {
+        a & b
+    }
+    #[inline(always)]
+    fn bits(m: u32) -> u32 {
+        m
+    }
+}
+
+#[cfg(all(
+    any(target_arch = "x86", target_arch = "x86_64"),
+    target_feature = "sse2"
+))]
+mod sse2 {
+    // The intrinsics are safe to call under `target_feature = "sse2"` in newer compilers and
+    // `unsafe` in older ones; the blocks below hold no other operation.
+    #![allow(unused_unsafe)]
+
+    #[cfg(target_arch = "x86")]
+    use core::arch::x86::*;
+    #[cfg(target_arch = "x86_64")]
+    use core::arch::x86_64::*;
+
+    use super::Lanes;
+
+    /// Four lanes in an SSE register.
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Sse2(__m128);
+
+    impl Lanes for Sse2 {
+        type Mask = __m128;
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Sse2(unsafe { _mm_set1_ps(x) })
+        }
+        #[inline(always)]
+        fn load(v: &[f32; 4]) -> Self {
+            // SAFETY: `v` is 16 readable bytes; the unaligned load has no alignment requirement.
+            Sse2(unsafe { _mm_loadu_ps(v.as_ptr()) })
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_add_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_sub_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_mul_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            Sse2(unsafe { _mm_and_ps(self.0, _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff))) })
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            Sse2(unsafe { _mm_xor_ps(self.0, _mm_set1_ps(-0.0)) })
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> __m128 {
+            unsafe { _mm_cmpgt_ps(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> __m128 {
+            unsafe { _mm_cmplt_ps(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn used(self) -> __m128 {
+            unsafe { _mm_cmpord_ps(self.0, self.0) }
+        }
+
+        #[inline(always)]
+        fn or(a: __m128, b: __m128) -> __m128 {
+            unsafe { _mm_or_ps(a, b) }
+        }
+        #[inline(always)]
+        fn and(a: __m128, b: __m128) -> __m128 {
+            unsafe { _mm_and_ps(a, b) }
+        }
+        #[inline(always)]
+        fn bits(m: __m128) -> u32 {
+            unsafe { _mm_movemask_ps(m) as u32 }
+        }
+    }
+}
+
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+mod neon {
+    // As for SSE2: safe under the target feature in newer compilers, `unsafe` in older ones.
+    #![allow(unused_unsafe)]
+
+    use core::arch::aarch64::*;
+
+    use super::Lanes;
+
+    /// Four lanes in a NEON register.
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Neon(float32x4_t);
+
+    impl Lanes for Neon {
+        type Mask = uint32x4_t;
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Neon(unsafe { vdupq_n_f32(x) })
+        }
+        #[inline(always)]
+        fn load(v: &[f32; 4]) -> Self {
+            // SAFETY: `v` is four readable f32.
+            Neon(unsafe { vld1q_f32(v.as_ptr()) })
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            Neon(unsafe { vaddq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            Neon(unsafe { vsubq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            Neon(unsafe { vmulq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            Neon(unsafe { vmaxq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            Neon(unsafe { vabsq_f32(self.0) })
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            Neon(unsafe { vnegq_f32(self.0) })
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> uint32x4_t {
+            unsafe { vcgtq_f32(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> uint32x4_t {
+            unsafe { vcltq_f32(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn used(self) -> uint32x4_t {
+            unsafe { vceqq_f32(self.0, self.0) }
+        }
+
+        #[inline(always)]
+        fn or(a: uint32x4_t, b: uint32x4_t) -> uint32x4_t {
+            unsafe { vorrq_u32(a, b) }
+        }
+        #[inline(always)]
+        fn and(a: uint32x4_t, b: uint32x4_t) -> uint32x4_t {
+            unsafe { vandq_u32(a, b) }
+        }
+        #[inline(always)]
+        fn bits(m: uint32x4_t) -> u32 {
+            let weights = [1u32, 2, 4, 8];
+            // SAFETY: `weights` is four readable u32.
+            unsafe { vaddvq_u32(vandq_u32(m, vld1q_u32(weights.as_ptr()))) }
+        }
+    }
+}
+
+/// The lanes the filter runs on for this target.
+#[cfg(all(
+    any(target_arch = "x86", target_arch = "x86_64"),
+    target_feature = "sse2"
+))]
+pub(crate) type F4 = sse2::Sse2;
+/// The lanes the filter runs on for this target.
+#[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
+pub(crate) type F4 = neon::Neon;
+/// The lanes the filter runs on for this target.
+#[cfg(not(any(
+    all(
+        any(target_arch = "x86", target_arch = "x86_64"),
+        target_feature = "sse2"
+    ),
+    all(target_arch = "aarch64", target_feature = "neon")
+)))]
+pub(crate) type F4 = Portable;

@@ -1,0 +1,381 @@
+//! The one ray/triangle test every structure uses: exact for the f32 ray and the f32 triangle.
+//!
+//! Three stages, each deciding what it can prove and passing the rest on (docs/design.md, "Triangle
+//! test"):
+//! 1. [`filter`]: four triangles at a time in f32 (SSE2, NEON or plain lanes), rejecting the ones
+//!    whose edge functions certainly have mixed signs, with an error bound that grows with the
+//!    triangle's distance from the ray origin;
+//! 2. the scalar test below: Woop, Benthin and Wald's edge functions in f64 with a certified error
+//!    bound; it decides every edge whose value is farther from zero than the bound, and rounds `t`
+//!    correctly whenever the bound allows;
+//! 3. [`exact`]: integer arithmetic on the f32 inputs for the edges and `t` the bound leaves open.
+//!
+//! The answer is therefore the exact one: the line `org + t·dir` meets the closed triangle (a
+//! triangle seen exactly edge-on is missed), `t` is the crossing's exact ray parameter rounded to
+//! the nearest f32 (ties to even; `+0.0` for zero), and the hit counts when that `t` is finite and
+//! in `[tmin, tmax]`. `u` and `v` are the barycentrics of the second and third vertex, within a few
+//! f64 ulps before rounding to f32.
+
+use glam::Vec3;
+
+use crate::ray::Ray;
+
+mod exact;
+pub mod filter;
+mod lanes;
+pub mod packs;
+
+pub use filter::Block4;
+
+use exact::ExactTriangle;
+
+/// Unit roundoff of f64 (2^-53).
+const U64: f64 = f64::EPSILON / 2.0;
+/// Relative slack added to every computed error bound so that the rounding of the bound's own
+/// arithmetic (a handful of operations on non-negative values) can never make it too small.
+const BOUND_SLACK: f64 = 1.0 + 1.0 / 262_144.0;
+/// Added to the f64 edge bound: covers underflow in its own arithmetic (the edge functions of f32
+/// inputs never come near f64's underflow range, docs/design.md).
+const EDGE_BOUND_FLOOR64: f64 = 1e-300;
+
+/// A ray with the per-ray constants of the triangle test computed once. Only
+/// [`PreparedRay::new`] makes one, and it refuses rays that cannot hit anything.
+///
+/// Guarantees: origin and direction are finite, the direction is not zero, `tmin ≤ tmax`, and neither
+/// is NaN.
+#[derive(Clone, Copy, Debug)]
+pub struct PreparedRay {
+    /// Origin.
+    pub org: Vec3,
+    /// Direction.
+    pub dir: Vec3,
+    /// Window start.
+    pub tmin: f32,
+    /// Window end.
+    pub tmax: f32,
+    /// Which of the six axis permutations the test uses: `2·kz + swap` (see [`PreparedRay::new`]).
+    axes: u8,
+    org64: [f64; 3],
+    sx: f64,
+    sy: f64,
+    sz: f64,
+    /// The shear in f32, for the four-wide filter.
+    sx32: f32,
+    sy32: f32,
+    /// Whether the f32 filter may run: set by [`PreparedRay::for_scene`] when no f32 value of the
+    /// filter can overflow.
+    filter_ok: bool,
+}
+
+/// A loop over triangles that wants the triangle test specialised for the ray's axis permutation:
+/// [`PreparedRay::dispatch`] calls `run` with one of six monomorphised testers, so the per-test code
+/// reads fixed coordinates instead of indexing vectors with run-time axes.
+pub(crate) trait TriangleLoop {
+    /// What the loop returns.
+    type Output;
+    /// Runs the loop with `test`.
+    fn run<T: TriangleTest>(self, test: T) -> Self::Output;
+}
+
+/// The shared triangle test for one prepared ray.
+pub(crate) trait TriangleTest: Copy {
+    /// The ray.
+    fn ray(&self) -> &PreparedRay;
+    /// Exactly [`PreparedRay::intersect_triangle`] on `tri` (finite coordinates).
+    fn test(&self, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)>;
+    /// The lanes of `block` that [`TriangleTest::test`] might hit (bit `k` for lane `k`): every lane
+    /// it would hit is set; most lanes it would miss are clear.
+    fn survivors(&self, block: &Block4) -> u32;
+}
+
+/// The test specialised for `kz` (the dominant axis of the direction) and `swap` (whether `kx` and
+/// `ky` trade places because `dir[kz] < 0`).
+#[derive(Clone, Copy)]
+pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(&'a PreparedRay);
+
+impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
+    #[inline(always)]
+    fn ray(&self) -> &PreparedRay {
+        self.0
+    }
+
+    // Out of line: it runs only for the filter's survivors (about one per ray), and one copy per
+    // kernel instead of one per walk keeps the library small.
+    #[inline(never)]
+    fn test(&self, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)> {
+        self.0.test_axes::<KZ, SWAP>(tri)
+    }
+
+    #[inline(always)]
+    fn survivors(&self, block: &Block4) -> u32 {
+        let r = self.0;
+        if !r.filter_ok {
+            return 0b1111;
+        }
+        filter::survivors::<lanes::F4, KZ, SWAP>(r.org, r.sx32, r.sy32, block)
+    }
+}
+
+/// One triangle, for [`PreparedRay::intersect_triangle`].
+struct Single<'a>(&'a [Vec3; 3]);
+
+impl TriangleLoop for Single<'_> {
+    type Output = Option<(f32, f32, f32)>;
+    #[inline(always)]
+    fn run<T: TriangleTest>(self, test: T) -> Self::Output {
+        test.test(self.0)
+    }
+}
+
+/// The largest magnitude of `N` values. `a > b ? a : b` is `f64::max` when neither is NaN (and
+/// magnitudes have no signed zeros), without `max`'s NaN handling.
+#[inline(always)]
+fn max_abs<const N: usize>(x: [f64; N]) -> f64 {
+    x.iter()
+        .fold(0.0, |m, &v| if v.abs() > m { v.abs() } else { m })
+}
+
+/// What the f64 stage could not settle about `t`: the exact stage rounds it.
+struct Undecided;
+
+/// How often the exact stage ran (tests check that their pairs reach it).
+#[cfg(test)]
+static COLD_EDGES: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
+#[cfg(test)]
+static COLD_T: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
+
+impl PreparedRay {
+    /// Prepares `ray`, or `None` when it can hit nothing: a NaN or infinite component, a zero
+    /// direction, a NaN bound, or `tmin > tmax`.
+    #[inline]
+    pub fn new(ray: &Ray) -> Option<PreparedRay> {
+        let (o, d) = (ray.org, ray.dir);
+        if !(o.is_finite() && d.is_finite()) || d == Vec3::ZERO {
+            return None;
+        }
+        // NaN fails both comparisons; an infinite tmin is allowed only as an empty window.
+        if !(ray.tmin <= ray.tmax) {
+            return None;
+        }
+        let a = d.abs();
+        let kz = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let mut kx = (kz + 1) % 3;
+        let mut ky = (kx + 1) % 3;
+        // Keep the winding so that the sign of the edge functions does not depend on the ray's sense.
+        let swap = d[kz] < 0.0;
+        if swap {
+            core::mem::swap(&mut kx, &mut ky);
+        }
+        Some(PreparedRay {
+            org: o,
+            dir: d,
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+            axes: (2 * kz + usize::from(swap)) as u8,
+            org64: [f64::from(o.x), f64::from(o.y), f64::from(o.z)],
+            sx: f64::from(d[kx]) / f64::from(d[kz]),
+            sy: f64::from(d[ky]) / f64::from(d[kz]),
+            sz: 1.0 / f64::from(d[kz]),
+            sx32: d[kx] / d[kz],
+            sy32: d[ky] / d[kz],
+            filter_ok: false,
+        })
+    }
+
+    /// Tells the test that every triangle it will be given has coordinates of magnitude at most
+    /// `scale`, which lets the four-wide f32 filter run when no value it computes can overflow
+    /// (`scale + |org|` below 2^60). Answers never depend on it: the filter only rejects what the
+    /// exact test rejects.
+    #[inline]
+    pub(crate) fn for_scene(mut self, scale: f32) -> Self {
+        let reach = f64::from(scale) + f64::from(self.org.abs().max_element());
+        self.filter_ok = reach < 1.152_921_504_606_847e18;
+        self
+    }
+
+    /// Runs `lp` with the triangle test specialised for this ray's axes.
+    #[inline(always)]
+    pub(crate) fn dispatch<L: TriangleLoop>(&self, lp: L) -> L::Output {
+        match self.axes {
+            0 => lp.run(Kernel::<0, false>(self)),
+            1 => lp.run(Kernel::<0, true>(self)),
+            2 => lp.run(Kernel::<1, false>(self)),
+            3 => lp.run(Kernel::<1, true>(self)),
+            4 => lp.run(Kernel::<2, false>(self)),
+            _ => lp.run(Kernel::<2, true>(self)),
+        }
+    }
+
+    /// The exact test against triangle `(p0, p1, p2)`: `Some((t, u, v))` when the line meets the
+    /// closed triangle and the crossing's `t`, rounded to the nearest f32, is finite and in
+    /// `[tmin, tmax]` (module docs). Rays through a shared edge or vertex of a closed mesh hit at
+    /// least one of the triangles there; a triangle seen exactly edge-on, or degenerate, is missed;
+    /// a non-finite coordinate is a miss.
+    #[inline]
+    pub fn intersect_triangle(&self, p0: Vec3, p1: Vec3, p2: Vec3) -> Option<(f32, f32, f32)> {
+        if !(p0.is_finite() && p1.is_finite() && p2.is_finite()) {
+            return None;
+        }
+        self.dispatch(Single(&[p0, p1, p2]))
+    }
+
+    /// The test with the axes fixed at compile time.
+    ///
+    /// Edge functions (Woop, Benthin, Wald 2013): translate to the origin (`p − o` in f64, exact
+    /// for most inputs and within one rounding always), shear so the ray runs along `+z`
+    /// (`x = (p[kx] − o[kx]) − sx·(p[kz] − o[kz])`, likewise `y`), then `U = cx·by − cy·bx`,
+    /// `V = ax·cy − ay·cx`, `W = bx·ay − by·ax`. Each equals `d·(c×b)/|d_kz|` (and so on) for the
+    /// exact translated vertices, up to the error bound `bound`, derived in docs/design.md:
+    /// with `S` the largest sheared `|x|, |y|` and `Z` the largest translated `|z|` of the three
+    /// vertices, every sheared coordinate is within `e = u·(2S + 4Z)` of its exact value and every
+    /// edge function within `S·(4u·S + 4e) + 2e²` (`u = 2^-53`, each factor rounded up).
+    #[inline(always)]
+    fn test_axes<const KZ: usize, const SWAP: bool>(
+        &self,
+        tri: &[Vec3; 3],
+    ) -> Option<(f32, f32, f32)> {
+        let kx = if SWAP { (KZ + 2) % 3 } else { (KZ + 1) % 3 };
+        let ky = if SWAP { (KZ + 1) % 3 } else { (KZ + 2) % 3 };
+        let o = &self.org64;
+        let rel = |p: &Vec3| {
+            let p = p.to_array();
+            let z = f64::from(p[KZ]) - o[KZ];
+            let x = (f64::from(p[kx]) - o[kx]) - self.sx * z;
+            let y = (f64::from(p[ky]) - o[ky]) - self.sy * z;
+            (x, y, z)
+        };
+        let (ax, ay, az) = rel(&tri[0]);
+        let (bx, by, bz) = rel(&tri[1]);
+        let (cx, cy, cz) = rel(&tri[2]);
+        let u = cx * by - cy * bx;
+        let v = ax * cy - ay * cx;
+        let w = bx * ay - by * ax;
+        let s = max_abs([ax, ay, bx, by, cx, cy]);
+        let zmax = max_abs([az, bz, cz]);
+        let e = (s + s + 4.0 * zmax) * (U64 * BOUND_SLACK);
+        let bound = (s * ((4.0 * U64 * BOUND_SLACK) * s + 4.0 * e) + 2.0 * (e * e)) * BOUND_SLACK
+            + EDGE_BOUND_FLOOR64;
+        // `|` instead of `||`: the same truth value (no side effects), fewer branches.
+        let pos = (u > bound) | (v > bound) | (w > bound);
+        let neg = (u < -bound) | (v < -bound) | (w < -bound);
+        if pos & neg {
+            return None;
+        }
+        let z = [az, bz, cz];
+        let decided = (u.abs() > bound) & (v.abs() > bound) & (w.abs() > bound);
+        if !decided {
+            return self.decide_exactly(tri, [u, v, w], bound, z, zmax);
+        }
+        match self.finish([u, v, w], bound, z, zmax) {
+            Ok(hit) => hit,
+            Err(Undecided) => self.finish_exactly(&ExactTriangle::new(self.org, self.dir, tri)),
+        }
+    }
+
+    /// `t`, the window and the barycentrics from edge functions of one sign (or zero, not all),
+    /// each within `err` of its exact value: the f64 stage's `t` when its error bound shows which
+    /// f32 it rounds to, [`Undecided`] otherwise.
+    ///
+    /// With `r = 6·err/|det|` (the relative error of the determinant) at most 1/4, the computed
+    /// `t` is within `2·(|t| + Z/|d_kz|)·(8u + 2r)` of the exact crossing (docs/design.md); when
+    /// both ends of that interval round to the same f32, so does the exact `t`.
+    #[inline(always)]
+    fn finish(
+        &self,
+        edges: [f64; 3],
+        err: f64,
+        z: [f64; 3],
+        zmax: f64,
+    ) -> Result<Option<(f32, f32, f32)>, Undecided> {
+        let [u, v, w] = edges;
+        let det = u + v + w;
+        let inv = 1.0 / det;
+        let t64 = (u * z[0] + v * z[1] + w * z[2]) * self.sz * inv;
+        let slack = 2.0
+            * (8.0 * U64 * det.abs() + 12.0 * err)
+            * (t64.abs() + zmax * self.sz.abs())
+            * inv.abs()
+            * BOUND_SLACK;
+        let (lo, hi) = ((t64 - slack) as f32, (t64 + slack) as f32);
+        // NaN or infinite slack fails `<=`; a tiny determinant fails the first test.
+        if !((48.0 * err <= det.abs()) & (slack <= f64::MAX)) {
+            return Err(Undecided);
+        }
+        // Rounding is monotone: when the whole interval rounds outside the window, so does the
+        // exact `t` (a bounce ray's own triangle, at t ≈ 0 below its tmin, ends here).
+        if hi < self.tmin || lo > self.tmax {
+            return Ok(None);
+        }
+        if lo.to_bits() != hi.to_bits() {
+            return Err(Undecided);
+        }
+        let t = if lo == 0.0 { 0.0 } else { lo };
+        if !(t >= self.tmin && t <= self.tmax && t.is_finite()) {
+            return Ok(None);
+        }
+        Ok(Some((t, (v * inv) as f32, (w * inv) as f32)))
+    }
+
+    /// The edges the f64 bound left open, decided in exact integers; then `t` as in
+    /// [`PreparedRay::finish`]. Rare (an edge within ~1e-15 of the ray), so kept out of line.
+    #[cold]
+    #[inline(never)]
+    fn decide_exactly(
+        &self,
+        tri: &[Vec3; 3],
+        mut edges: [f64; 3],
+        bound: f64,
+        z: [f64; 3],
+        zmax: f64,
+    ) -> Option<(f32, f32, f32)> {
+        #[cfg(test)]
+        COLD_EDGES.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        let exact = ExactTriangle::new(self.org, self.dir, tri);
+        let mut signs = [0i8; 3];
+        for (k, (value, sign)) in edges.iter_mut().zip(signs.iter_mut()).enumerate() {
+            if value.abs() > bound {
+                *sign = if *value > 0.0 { 1 } else { -1 };
+            } else {
+                *sign = exact.edge_sign(k);
+                // A value of the wrong sign (or an exact zero) is replaced by zero: still within
+                // twice the bound of the exact value, and no longer of the wrong sign.
+                if (*value > 0.0 && *sign <= 0) || (*value < 0.0 && *sign >= 0) || *sign == 0 {
+                    *value = 0.0;
+                }
+            }
+        }
+        let pos = signs.iter().any(|&s| s > 0);
+        let neg = signs.iter().any(|&s| s < 0);
+        if pos == neg {
+            // Mixed signs: the line passes outside. All zero: the triangle is seen edge-on.
+            return None;
+        }
+        match self.finish(edges, 2.0 * bound, z, zmax) {
+            Ok(hit) => hit,
+            Err(Undecided) => self.finish_exactly(&exact),
+        }
+    }
+
+    /// `t` rounded exactly, then the window, for a line known to meet the triangle.
+    #[cold]
+    #[inline(never)]
+    fn finish_exactly(&self, exact: &ExactTriangle) -> Option<(f32, f32, f32)> {
+        #[cfg(test)]
+        COLD_T.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
+        let t = exact.rounded_t()?;
+        if !(t >= self.tmin && t <= self.tmax && t.is_finite()) {
+            return None;
+        }
+        let (u, v) = exact.barycentrics();
+        Some((t, u, v))
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,82 @@
+//! The triangles of a structure's reference list, four to a [`Block4`] in the list's order, so that
+//! the hot loop reads them without going through the mesh.
+
+use alloc::vec::Vec;
+
+use super::Block4;
+use crate::budget::{bytes_of, MemoryBudget};
+use crate::error::BuildError;
+use crate::mesh::TriMesh;
+
+/// How a structure holds the triangles its cells or leaves reference.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum TriangleLayout {
+    /// A copy of each referenced triangle beside the reference list, four per 144-byte block in
+    /// the list's order (36 bytes per reference): the fastest.
+    #[default]
+    Packed,
+    /// Only the list of triangle ids; each test gathers its four triangles from the mesh (no
+    /// bytes beyond the ids), for builds where memory counts more than speed.
+    Indexed,
+}
+
+/// Blocks of four triangles in the order of a reference list (empty for
+/// [`TriangleLayout::Indexed`]).
+///
+/// Guarantees: with [`TriangleLayout::Packed`], block `i` lane `k` holds the triangle
+/// `refs[4·i + k]` of the list it was built from (lanes past the end are zero), and there are
+/// `ceil(refs.len() / 4)` blocks.
+#[derive(Debug, Default)]
+pub struct TrianglePacks {
+    blocks: Vec<Block4>,
+}
+
+impl TrianglePacks {
+    /// Packs the triangles `refs` names (ids of `mesh`), charging the blocks to `budget`.
+    pub fn build(
+        mesh: &TriMesh,
+        refs: &[u32],
+        layout: TriangleLayout,
+        budget: &mut MemoryBudget,
+    ) -> Result<TrianglePacks, BuildError> {
+        if layout == TriangleLayout::Indexed || refs.is_empty() {
+            return Ok(TrianglePacks::default());
+        }
+        let mut blocks = budget.vec::<Block4>(refs.len().div_ceil(4), "triangle packs")?;
+        for chunk in refs.chunks(4) {
+            let mut block = Block4::default();
+            for (lane, &prim) in chunk.iter().enumerate() {
+                if let Some(tri) = mesh.triangle(prim) {
+                    block.set(lane, tri);
+                }
+            }
+            blocks.push(block);
+        }
+        Ok(TrianglePacks { blocks })
+    }
+
+    /// Block `i`, or `None` when there are no packs (indexed layout) or no such block.
+    #[inline(always)]
+    pub fn block(&self, i: usize) -> Option<&Block4> {
+        self.blocks.get(i)
+    }
+
+    /// The layout these packs serve.
+    pub fn layout(&self) -> TriangleLayout {
+        if self.blocks.is_empty() {
+            TriangleLayout::Indexed
+        } else {
+            TriangleLayout::Packed
+        }
+    }
+
+    /// Bytes held.
+    pub fn memory_bytes(&self) -> usize {
+        bytes_of(&self.blocks)
+    }
+
+    /// Gives the bytes back to the budget they were charged to.
+    pub fn release(self, budget: &mut MemoryBudget) {
+        budget.free(self.blocks);
+    }
+}

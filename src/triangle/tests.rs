@@ -1,0 +1,459 @@
+//! The triangle test against its definition: the exact integer answer, on random and adversarial
+//! ray/triangle pairs; the four-wide filter never rejects a hit; the list test equals the scalar one.
+
+use glam::Vec3;
+
+use super::exact::ExactTriangle;
+use super::lanes::{Lanes, Portable, F4};
+use super::{filter, Block4, PreparedRay};
+use crate::ray::Ray;
+use crate::workload::SplitMix64;
+
+/// The definition, computed in exact integers throughout: the line meets the closed triangle (exact
+/// edge signs, not mixed, not all zero), `t` rounded to nearest, in the window and finite.
+fn definition(ray: &Ray, tri: &[Vec3; 3]) -> Option<f32> {
+    let r = PreparedRay::new(ray)?;
+    if !tri.iter().all(|p| p.is_finite()) {
+        return None;
+    }
+    let e = ExactTriangle::new(r.org, r.dir, tri);
+    let s = [e.edge_sign(0), e.edge_sign(1), e.edge_sign(2)];
+    let pos = s.iter().any(|&x| x > 0);
+    let neg = s.iter().any(|&x| x < 0);
+    if pos == neg {
+        return None;
+    }
+    let t = e.rounded_t()?;
+    (t.is_finite() && t >= r.tmin && t <= r.tmax).then_some(t)
+}
+
+/// Checks the production test against the definition on one pair: the same decision and the same
+/// `t` bits; barycentrics close to the exact ones and in `[0, 1]`. Returns the answer.
+fn check(ray: &Ray, tri: &[Vec3; 3]) -> Option<f32> {
+    let want = definition(ray, tri);
+    let got = PreparedRay::new(ray).and_then(|r| r.intersect_triangle(tri[0], tri[1], tri[2]));
+    assert_eq!(
+        got.map(|h| h.0.to_bits()),
+        want.map(f32::to_bits),
+        "ray {ray:?} triangle {tri:?}: got {got:?}, want t = {want:?}"
+    );
+    if let (Some((_, u, v)), Some(_)) = (got, want) {
+        let r = PreparedRay::new(ray).unwrap();
+        let (eu, ev) = ExactTriangle::new(r.org, r.dir, tri).barycentrics();
+        for (x, ex) in [(u, eu), (v, ev)] {
+            assert!(
+                (0.0..=1.0).contains(&x),
+                "{x} outside [0, 1]: {ray:?} {tri:?}"
+            );
+            assert!(
+                (x - ex).abs() <= 1e-6,
+                "barycentric {x} vs exact {ex}: {ray:?} {tri:?}"
+            );
+        }
+    }
+    want
+}
+
+fn signed(rng: &mut SplitMix64) -> f32 {
+    2.0 * rng.next_f32() - 1.0
+}
+
+fn point(rng: &mut SplitMix64) -> Vec3 {
+    Vec3::new(signed(rng), signed(rng), signed(rng))
+}
+
+/// A log-uniform-ish magnitude in `[10^lo, 10^hi]`.
+fn log_uniform(rng: &mut SplitMix64, lo: f32, hi: f32) -> f32 {
+    let e = (lo + (hi - lo) * rng.next_f32()) * core::f32::consts::LOG2_10;
+    let k = crate::math::floor(e);
+    let pow2 = f32::from_bits((((k as i32).clamp(-126, 127) + 127) as u32) << 23);
+    pow2 * (1.0 + (e - k))
+}
+
+/// A triangle of one of several awkward kinds, before scaling.
+fn triangle(rng: &mut SplitMix64) -> [Vec3; 3] {
+    let p0 = point(rng);
+    match rng.below(8) {
+        // Degenerate: collinear or repeated vertices.
+        0 => {
+            let p1 = point(rng);
+            let k = [0.0, 0.5, 2.0, -1.0][rng.below(4)];
+            [p0, p1, p0 + k * (p1 - p0)]
+        }
+        // Sliver: third vertex a tiny distance off the first edge.
+        1 => {
+            let p1 = point(rng);
+            let off = point(rng) * log_uniform(rng, -7.0, -2.0);
+            [p0, p1, 0.5 * (p0 + p1) + off]
+        }
+        // Axis-aligned (a shared coordinate).
+        2 => {
+            let (mut p1, mut p2) = (point(rng), point(rng));
+            let a = rng.below(3);
+            p1[a] = p0[a];
+            p2[a] = p0[a];
+            [p0, p1, p2]
+        }
+        // Small triangle.
+        3 => {
+            let s = log_uniform(rng, -4.0, -1.0);
+            [p0, p0 + s * point(rng), p0 + s * point(rng)]
+        }
+        _ => [p0, point(rng), point(rng)],
+    }
+}
+
+/// A point of the triangle's plane at a vertex, on or near an edge, or inside, sometimes pushed
+/// just outside.
+fn target(rng: &mut SplitMix64, tri: &[Vec3; 3]) -> Vec3 {
+    let mut b = [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+    match rng.below(6) {
+        0 => {
+            b = [0.0; 3];
+            b[rng.below(3)] = 1.0;
+        }
+        1 | 2 => b[rng.below(3)] = 0.0,
+        _ => {}
+    }
+    let sum = b[0] + b[1] + b[2];
+    b = if sum > 0.0 {
+        b.map(|x| x / sum)
+    } else {
+        [1.0, 0.0, 0.0]
+    };
+    if rng.below(2) == 0 {
+        let k = rng.below(3);
+        let d = log_uniform(rng, -9.0, -2.0);
+        b[k] -= d;
+        b[(k + 1) % 3] += d;
+    }
+    match rng.below(8) {
+        // An exact vertex, or an exactly representable edge midpoint.
+        0 => tri[rng.below(3)],
+        1 => {
+            let k = rng.below(3);
+            0.5 * (tri[k] + tri[(k + 1) % 3])
+        }
+        _ => b[0] * tri[0] + b[1] * tri[1] + b[2] * tri[2],
+    }
+}
+
+/// Directions with the awkward cases of the axis choice: ties between components, axis-parallel
+/// directions and −0.0 components.
+fn awkward_direction(rng: &mut SplitMix64, d: Vec3) -> Vec3 {
+    match rng.below(10) {
+        0 => {
+            let mut e = Vec3::splat(if rng.below(2) == 0 { 0.0 } else { -0.0 });
+            e[rng.below(3)] = if rng.below(2) == 0 { 1.0 } else { -1.0 };
+            e
+        }
+        1 => {
+            let mut e = d;
+            let (i, j) = (rng.below(3), rng.below(3));
+            e[i] = e[j].abs() * if rng.below(2) == 0 { 1.0 } else { -1.0 };
+            e
+        }
+        2 => Vec3::new(1.0, -1.0, if rng.below(2) == 0 { 1.0 } else { -1.0 }),
+        _ => d,
+    }
+}
+
+/// Scales and offsets of the scenes the pairs are placed in: unit, tiny, near-subnormal, huge, far
+/// from the origin.
+const SCALES: [(f32, Vec3); 8] = [
+    (1.0, Vec3::ZERO),
+    (1e-20, Vec3::ZERO),
+    (1e-38, Vec3::ZERO),
+    (1e30, Vec3::ZERO),
+    (1e-2, Vec3::new(1e4, -2e4, 3e4)),
+    (1.0, Vec3::new(3e6, 0.0, -1e6)),
+    (1e5, Vec3::new(-1e3, 1e3, 0.5)),
+    (1.0, Vec3::new(0.25, 0.5, -0.75)),
+];
+
+/// Pair number `case`: a triangle and a ray aimed at it (a vertex, an edge, inside, just outside),
+/// from near or far, sometimes grazing, sometimes in an awkward direction; one in eight is a plain
+/// random ray.
+fn pair(rng: &mut SplitMix64, case: usize) -> (Ray, [Vec3; 3]) {
+    let (scale, offset) = SCALES[case % SCALES.len()];
+    let tri = triangle(rng).map(|p| p * scale + offset);
+    if case % 8 == 7 {
+        let ray = Ray::new(point(rng) * 2.0 * scale + offset, point(rng));
+        return (ray, tri);
+    }
+    let aim = target(rng, &tri);
+    if case % 8 == 3 {
+        // A line exactly through the target (often a vertex or an edge midpoint): the origin a
+        // small integer vector away, so `aim − org` is exact and the exact edge functions of the
+        // edges through the target are zero, where floating point gives noise of either sign.
+        let v = Vec3::new(
+            rng.below(7) as f32 - 3.0,
+            rng.below(7) as f32 - 3.0,
+            rng.below(5) as f32 + 1.0,
+        ) * (scale * 0.25);
+        let org = aim + v;
+        return (Ray::new(org, aim - org), tri);
+    }
+    let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+    let mut out = point(rng).normalize_or(Vec3::X);
+    if rng.below(5) == 0 && n.length() > 0.0 && n.is_finite() {
+        let n = n.normalize();
+        out = (out - n * out.dot(n)).normalize_or(Vec3::X) + n * log_uniform(rng, -7.0, -1.0);
+    }
+    let org = aim + out * (scale * log_uniform(rng, -3.0, 3.0));
+    let dir = match rng.below(8) {
+        0 => point(rng),
+        1 => awkward_direction(rng, aim - org),
+        _ => (aim - org) * log_uniform(rng, -3.0, 3.0),
+    };
+    (Ray::new(org, dir), tri)
+}
+
+#[test]
+fn the_test_gives_the_exact_answer() {
+    use core::sync::atomic::Ordering::Relaxed;
+    let (edges0, t0) = (super::COLD_EDGES.load(Relaxed), super::COLD_T.load(Relaxed));
+    let mut rng = SplitMix64::new(0x7e57);
+    let (mut hits, mut misses, mut windows) = (0usize, 0usize, 0usize);
+    for case in 0..300_000 {
+        let (ray, tri) = pair(&mut rng, case);
+        match check(&ray, &tri) {
+            Some(t) => {
+                hits += 1;
+                // Windows that start or end exactly at the hit, or just past it.
+                for (lo, hi) in [
+                    (t, t),
+                    (t, f32::INFINITY),
+                    (0.0, t),
+                    (f32::from_bits(t.to_bits() + 1), f32::INFINITY),
+                    (-f32::INFINITY, t * 0.999_999_9),
+                ] {
+                    check(&Ray::segment(ray.org, ray.dir, lo, hi), &tri);
+                    windows += 1;
+                }
+            }
+            None => misses += 1,
+        }
+    }
+    assert!(
+        hits > 50_000 && misses > 50_000 && windows > 0,
+        "{hits} hits, {misses} misses"
+    );
+    // The pairs reach the exact stage often enough for the comparison to cover it.
+    let edges = super::COLD_EDGES.load(Relaxed) - edges0;
+    let t = super::COLD_T.load(Relaxed) - t0;
+    assert!(
+        edges > 1_000 && t > 100,
+        "exact stage reached {edges} times for edges, {t} for t"
+    );
+}
+
+#[test]
+fn rays_through_shared_vertices_and_edges_hit_a_neighbour() {
+    // A fan of triangles around a vertex and a strip sharing edges, with integer coordinates: rays
+    // aimed exactly at the shared vertex and edge midpoints must hit at least one of them.
+    let c = Vec3::new(0.0, 0.0, 0.0);
+    let ring: [Vec3; 6] = core::array::from_fn(|k| {
+        let a = k as f32 * core::f32::consts::TAU / 6.0;
+        Vec3::new(
+            crate::math::cos(a) * 4.0,
+            crate::math::sin(a) * 4.0,
+            (k % 2) as f32,
+        )
+    });
+    let fan: [[Vec3; 3]; 6] = core::array::from_fn(|k| [c, ring[k], ring[(k + 1) % 6]]);
+    let mut rng = SplitMix64::new(3);
+    for _ in 0..20_000 {
+        let k = rng.below(6);
+        let aim = match rng.below(3) {
+            0 => c,
+            1 => ring[k],
+            _ => 0.5 * (c + ring[k]),
+        };
+        let mut org = point(&mut rng) * 10.0;
+        org.z = 5.0 + rng.next_f32() * 5.0;
+        let ray = Ray::new(org, aim - org);
+        let hit = fan.iter().any(|tri| check(&ray, tri).is_some());
+        // The fan is a height field over the hexagon seen from above: a ray descending to its inner
+        // vertex or to a spoke's midpoint meets it there or before. (Rays at the outer vertices may
+        // graze the rim and are only checked against the definition.)
+        if aim != ring[k] {
+            assert!(hit, "ray {ray:?} slipped through the fan");
+        }
+    }
+}
+
+#[test]
+fn rays_that_cannot_hit_are_refused() {
+    let tri = [Vec3::ZERO, Vec3::X, Vec3::Y];
+    for ray in [
+        Ray::new(Vec3::new(0.2, 0.2, 1.0), Vec3::ZERO),
+        Ray::new(Vec3::new(f32::NAN, 0.2, 1.0), -Vec3::Z),
+        Ray::new(
+            Vec3::new(0.2, 0.2, 1.0),
+            Vec3::new(0.0, f32::INFINITY, -1.0),
+        ),
+        Ray::segment(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 2.0, 1.0),
+        Ray::segment(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, f32::NAN, 1.0),
+    ] {
+        assert!(PreparedRay::new(&ray).is_none(), "{ray:?}");
+    }
+    // An empty window at infinity is a valid ray that hits nothing (hits have a finite t).
+    let at_infinity = Ray::segment(
+        Vec3::new(0.2, 0.2, 1.0),
+        -Vec3::Z,
+        f32::INFINITY,
+        f32::INFINITY,
+    );
+    assert_eq!(check(&at_infinity, &tri), None);
+    let r = PreparedRay::new(&Ray::new(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z)).unwrap();
+    assert!(r.intersect_triangle(tri[0], tri[1], tri[2]).is_some());
+    for bad in [f32::NAN, f32::INFINITY] {
+        assert!(r
+            .intersect_triangle(Vec3::ZERO, Vec3::new(bad, 0.0, 0.0), Vec3::Y)
+            .is_none());
+    }
+    // A window exactly at the hit, and one ulp short of it.
+    let one = Ray::segment(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 1.0, 1.0);
+    assert_eq!(check(&one, &tri), Some(1.0));
+    let short = Ray::segment(Vec3::new(0.2, 0.2, 1.0), -Vec3::Z, 0.0, 0.999_999_94);
+    assert_eq!(check(&short, &tri), None);
+    // Edge-on: the ray lies in the triangle's plane.
+    let edge_on = Ray::new(Vec3::new(-1.0, 0.2, 0.0), Vec3::X);
+    assert_eq!(check(&edge_on, &tri), None);
+    // Crossing beyond the f32 range: a miss.
+    let far = Ray::new(Vec3::new(0.2, 0.2, 3e38), Vec3::new(0.0, 0.0, -1e-3));
+    assert_eq!(check(&far, &tri), None);
+}
+
+/// The lanes the exact test hits, for the four triangles of `block`.
+fn hit_lanes(ray: &Ray, block: &Block4) -> u32 {
+    (0..4).fold(0, |m, k| {
+        m | (u32::from(definition(ray, &block.get(k)).is_some()) << k)
+    })
+}
+
+#[test]
+fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
+    let mut rng = SplitMix64::new(0xf1);
+    for case in 0..100_000 {
+        let (ray, tri) = pair(&mut rng, case);
+        let mut block = Block4::default();
+        // The pair's triangle, a random one near it and two from other pairs' scales.
+        block.set(0, &tri);
+        for lane in 1..4 {
+            let (_, other) = pair(&mut rng, case + lane);
+            block.set(lane, &other);
+        }
+        let Some(r) = PreparedRay::new(&ray) else {
+            continue;
+        };
+        let scale = (0..4)
+            .flat_map(|k| block.get(k))
+            .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
+        let r = r.for_scene(scale);
+        let o = r.org;
+        let kz = usize::from(r.axes / 2);
+        let swap = r.axes % 2 == 1;
+        let run = |portable: bool| -> u32 {
+            macro_rules! go {
+                ($l:ty) => {
+                    match (kz, swap) {
+                        (0, false) => filter::survivors::<$l, 0, false>(o, r.sx32, r.sy32, &block),
+                        (0, true) => filter::survivors::<$l, 0, true>(o, r.sx32, r.sy32, &block),
+                        (1, false) => filter::survivors::<$l, 1, false>(o, r.sx32, r.sy32, &block),
+                        (1, true) => filter::survivors::<$l, 1, true>(o, r.sx32, r.sy32, &block),
+                        (2, false) => filter::survivors::<$l, 2, false>(o, r.sx32, r.sy32, &block),
+                        _ => filter::survivors::<$l, 2, true>(o, r.sx32, r.sy32, &block),
+                    }
+                };
+            }
+            if portable {
+                go!(Portable)
+            } else {
+                go!(F4)
+            }
+        };
+        if !r.filter_ok {
+            continue;
+        }
+        let (vector, plain) = (run(false), run(true));
+        assert_eq!(vector, plain, "vector and portable lanes differ: {ray:?}");
+        let hits = hit_lanes(&ray, &block);
+        assert_eq!(
+            hits & !vector,
+            0,
+            "filter rejected a hit: {ray:?} {block:?}"
+        );
+    }
+    // A filter that rejected nothing would pass the check above: it must also do its job. Random
+    // rays against random unit triangles are almost all misses, most of them clear.
+    let (mut rejected, mut misses) = (0u32, 0u32);
+    for _ in 0..20_000 {
+        let ray = Ray::new(point(&mut rng) * 2.0, point(&mut rng));
+        let mut block = Block4::default();
+        for lane in 0..4 {
+            block.set(lane, &[point(&mut rng), point(&mut rng), point(&mut rng)]);
+        }
+        let Some(r) = PreparedRay::new(&ray) else {
+            continue;
+        };
+        let r = r.for_scene(1.0);
+        let kernel = super::Kernel::<2, false>(&r);
+        let survivors = match r.axes {
+            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>(&r), &block),
+            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>(&r), &block),
+            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>(&r), &block),
+            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>(&r), &block),
+            4 => super::TriangleTest::survivors(&kernel, &block),
+            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>(&r), &block),
+        };
+        let hits = hit_lanes(&ray, &block);
+        assert_eq!(
+            hits & !survivors,
+            0,
+            "filter rejected a hit: {ray:?} {block:?}"
+        );
+        misses += 4 - hits.count_ones();
+        rejected += 4 - survivors.count_ones();
+    }
+    assert!(
+        f64::from(rejected) > 0.95 * f64::from(misses),
+        "rejected {rejected} of {misses} misses"
+    );
+}
+
+#[test]
+fn portable_lanes_do_what_the_vector_lanes_do() {
+    let mut rng = SplitMix64::new(9);
+    for _ in 0..10_000 {
+        let a: [f32; 4] =
+            core::array::from_fn(|_| signed(&mut rng) * log_uniform(&mut rng, -30.0, 30.0));
+        let b: [f32; 4] =
+            core::array::from_fn(|_| signed(&mut rng) * log_uniform(&mut rng, -30.0, 30.0));
+        let (pa, pb, va, vb) = (
+            Portable::load(&a),
+            Portable::load(&b),
+            F4::load(&a),
+            F4::load(&b),
+        );
+        let same = |p: Portable, v: F4| {
+            let (p, v) = (
+                Portable::bits(Portable::lt(p, Portable::splat(0.0)))
+                    | (Portable::bits(Portable::gt(p, Portable::splat(1.0))) << 4),
+                F4::bits(F4::lt(v, F4::splat(0.0))) | (F4::bits(F4::gt(v, F4::splat(1.0))) << 4),
+            );
+            assert_eq!(p, v);
+        };
+        same(pa.add(pb), va.add(vb));
+        same(pa.sub(pb), va.sub(vb));
+        same(pa.mul(pb), va.mul(vb));
+        same(pa.max(pb), va.max(vb));
+        same(pa.abs(), va.abs());
+        same(pa.neg(), va.neg());
+        assert_eq!(
+            Portable::bits(Portable::and(pa.gt(pb), Portable::or(pa.lt(pb), pb.gt(pa)))),
+            F4::bits(F4::and(va.gt(vb), F4::or(va.lt(vb), vb.gt(va))))
+        );
+    }
+}
