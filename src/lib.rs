@@ -1,8 +1,8 @@
 //! rayq: a ray query core for triangle meshes.
 //!
-//! It builds a uniform grid in linear time (and, later, a SAH kd-tree), answers closest-hit and any-hit
-//! queries with one watertight triangle test shared by every structure, and is exported to C through
-//! `include/rayq.h` (feature `capi`). The core is `no_std` + `alloc`: every allocation during a build is
+//! It builds a uniform grid in linear time and a SAH kd-tree, picks the one that finishes a ray budget
+//! first ([`Scene`]), answers closest-hit and any-hit queries with one exact triangle test shared by
+//! every structure ([`triangle`]), and is exported to C through `include/rayq.h` (feature `capi`). The core is `no_std` + `alloc`: every allocation during a build is
 //! fallible and counted against an optional memory limit, and queries never allocate.
 //!
 //! Start with [`Scene::build`], or with [`UniformGrid::build`] when you want one structure directly.

@@ -5,7 +5,7 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 use crate::accel::brute::test_all;
-use crate::accel::{run_query, test_refs, Aabb, RayQuery};
+use crate::accel::{run_query, test_refs, Aabb, Mailbox, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
@@ -448,6 +448,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         let Walk { grid, mesh, work } = self;
         let r = test.ray();
         let mut best = Hit::MISS;
+        let mut mailbox = Mailbox::new();
         if grid.offsets.is_empty() {
             return best;
         }
@@ -585,9 +586,16 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let listed = grid.refs.get(first..last).unwrap_or(&[]);
                 work.tests += listed.iter().filter(|&&p| p != Hit::INVALID_ID).count() as u32;
             }
-            if let Some(h) =
-                test_refs::<T, ANY>(&test, mesh, &grid.packs, &grid.refs, first, last, &mut best)
-            {
+            if let Some(h) = test_refs::<T, ANY>(
+                &test,
+                mesh,
+                &grid.packs,
+                &grid.refs,
+                first,
+                last,
+                &mut best,
+                &mut mailbox,
+            ) {
                 return h;
             }
             // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit

@@ -378,4 +378,6 @@ impl PreparedRay {
 }
 
 #[cfg(test)]
+pub(crate) mod testgen;
+#[cfg(test)]
 mod tests;

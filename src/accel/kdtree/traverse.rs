@@ -10,7 +10,7 @@
 //! a nearer hit, or an equally near one with a lower id, is never skipped.
 
 use super::{KdTree, KdWork, MAX_DEPTH};
-use crate::accel::test_refs;
+use crate::accel::{test_refs, Mailbox};
 use crate::mesh::TriMesh;
 use crate::ray::Hit;
 use crate::triangle::{TriangleLoop, TriangleTest};
@@ -43,6 +43,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         let Walk { tree, mesh, work } = self;
         let r = test.ray();
         let mut best = Hit::MISS;
+        let mut mailbox = Mailbox::new();
         if tree.bounds.is_empty() {
             return best;
         }
@@ -153,6 +154,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                     start,
                     end,
                     &mut best,
+                    &mut mailbox,
                 ) {
                     return h;
                 }
