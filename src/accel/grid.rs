@@ -5,7 +5,7 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 use crate::accel::brute::test_all;
-use crate::accel::{run_query, test_refs, Aabb, Mailbox, RayQuery};
+use crate::accel::{run_query, test_refs, Aabb, Mailbox, RayQuery, Refs};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
@@ -366,6 +366,15 @@ impl UniformGrid {
         }
     }
 
+    /// The reference list with its packs, for the list test.
+    #[inline(always)]
+    fn refs(&self) -> Refs<'_> {
+        Refs {
+            ids: &self.refs,
+            packs: &self.packs,
+        }
+    }
+
     /// The part of `refs` that lists cell `index`'s triangles (empty for an index outside the grid).
     #[inline(always)]
     fn cell_span(&self, index: i64) -> (usize, usize) {
@@ -586,16 +595,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let listed = grid.refs.get(first..last).unwrap_or(&[]);
                 work.tests += listed.iter().filter(|&&p| p != Hit::INVALID_ID).count() as u32;
             }
-            if let Some(h) = test_refs::<T, ANY>(
-                &test,
-                mesh,
-                &grid.packs,
-                &grid.refs,
-                first,
-                last,
-                &mut best,
-                &mut mailbox,
-            ) {
+            let refs = grid.refs();
+            if let Some(h) =
+                test_refs::<T, ANY>(&test, mesh, refs, (first, last), &mut best, &mut mailbox)
+            {
                 return h;
             }
             // Any triangle not yet tested lies beyond this cell (by the insertion margin), so a hit

@@ -78,8 +78,17 @@ impl Mailbox {
     }
 }
 
-/// Tests the triangles `ids[start..end]` (a cell's or a leaf's part of a structure's reference
-/// list, `packs` built from that list) and keeps the best hit in `best` by the shared tie rule
+/// A structure's reference list and the packs of its triangles (built from that list, or empty for
+/// the indexed layout).
+#[derive(Clone, Copy)]
+pub(crate) struct Refs<'a> {
+    /// Triangle ids, cell by cell or leaf by leaf.
+    pub ids: &'a [u32],
+    /// Their triangles, four to a block in the same order.
+    pub packs: &'a TrianglePacks,
+}
+
+/// Tests the triangles `refs.ids[start..end]` (a cell's or a leaf's part of the list) and keeps the best hit in `best` by the shared tie rule
 /// ([`Hit::beats`]). With `ANY`, returns the first hit at once.
 ///
 /// Four at a time: the f32 filter rejects the clear misses of a block and each survivor gets the
@@ -88,13 +97,12 @@ impl Mailbox {
 pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
     test: &T,
     mesh: &TriMesh,
-    packs: &TrianglePacks,
-    ids: &[u32],
-    start: usize,
-    end: usize,
+    refs: Refs<'_>,
+    (start, end): (usize, usize),
     best: &mut Hit,
     mailbox: &mut Mailbox,
 ) -> Option<Hit> {
+    let Refs { ids, packs } = refs;
     // An empty list at an offset that is not a multiple of 4 must not test the block around it.
     if start >= end {
         return None;
@@ -179,14 +187,15 @@ mod tests {
             fn run<T: TriangleTest>(self, test: T) -> Hit {
                 let mut best = Hit::MISS;
                 let mut mailbox = Mailbox::new();
-                let (a, b) = self.range;
+                let refs = Refs {
+                    ids: self.ids,
+                    packs: self.packs,
+                };
                 let any = test_refs::<T, ANY>(
                     &test,
                     self.mesh,
-                    self.packs,
-                    self.ids,
-                    a,
-                    b,
+                    refs,
+                    self.range,
                     &mut best,
                     &mut mailbox,
                 );

@@ -10,7 +10,7 @@
 //! a nearer hit, or an equally near one with a lower id, is never skipped.
 
 use super::{KdTree, KdWork, MAX_DEPTH};
-use crate::accel::{test_refs, Mailbox};
+use crate::accel::{test_refs, Mailbox, Refs};
 use crate::mesh::TriMesh;
 use crate::ray::Hit;
 use crate::triangle::{TriangleLoop, TriangleTest};
@@ -146,16 +146,13 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                     work.leaves += 1;
                     work.tests += node.count();
                 }
-                if let Some(h) = test_refs::<T, ANY>(
-                    &test,
-                    mesh,
-                    &tree.packs,
-                    &tree.prims,
-                    start,
-                    end,
-                    &mut best,
-                    &mut mailbox,
-                ) {
+                let refs = Refs {
+                    ids: &tree.prims,
+                    packs: &tree.packs,
+                };
+                if let Some(h) =
+                    test_refs::<T, ANY>(&test, mesh, refs, (start, end), &mut best, &mut mailbox)
+                {
                     return h;
                 }
             }
