@@ -20,7 +20,7 @@ fn load(spec: &str) -> Result<MeshData, String> {
         return rayq::procedural::by_name(name, tris)
             .ok_or_else(|| format!("unknown scene {name}"));
     }
-    rayq::obj::load_obj(spec)
+    Ok(rayq::obj::load_obj(spec)?)
 }
 
 fn main() -> Result<(), String> {
