@@ -107,100 +107,87 @@ static void capture(void *user, rq_status status, const char *message) {
   snprintf(c->message, sizeof c->message, "%s", message ? message : "(NULL)");
 }
 
-/* Loads `path` with rq_obj_load and with rq_obj_load_ex; both must refuse it with `want`, leave *out
- * untouched, and the callback must be told once, with a message that contains every `needles` entry. */
-static void check_refused(const char *path, rq_status want, const char *const *needles, size_t n) {
-  rq_obj *obj = (rq_obj *)test_sentinel();
-  CHECK_STATUS(rq_obj_load(path, &obj), want);
-  CHECK(obj == (rq_obj *)test_sentinel());
-
-  captured c;
-  memset(&c, 0, sizeof c);
+/* Options whose on_error records into `c` (cleared here). */
+static rq_obj_load_options capturing(captured *c) {
+  memset(c, 0, sizeof *c);
   rq_obj_load_options opts;
   rq_obj_load_options_init(&opts);
   opts.on_error = capture;
-  opts.user = &c;
-  CHECK_STATUS(rq_obj_load_ex(path, &opts, &obj), want);
+  opts.user = c;
+  return opts;
+}
+
+/* A file the helper must refuse: its name and text (NULL: not written, the path is used as it is),
+ * the status, and what the message must contain (up to three pieces, the unused ones NULL). */
+typedef struct refused_case {
+  const char *path;
+  const char *text;
+  rq_status status;
+  const char *needles[3];
+} refused_case;
+
+static const refused_case refused_cases[] = {
+    /* A file that does not exist: the message names it, and there is no line to name. */
+    {"no-such-file.obj", NULL, RQ_STATUS_OBJ_UNREADABLE, {"no-such-file.obj: cannot open: ", NULL, NULL}},
+#if defined(__unix__)
+    /* A directory opens on POSIX systems and fails at the first read. */
+    {".", NULL, RQ_STATUS_OBJ_UNREADABLE, {".:1: cannot read: ", NULL, NULL}},
+#endif
+    /* Malformed lines: a coordinate that is not a number, too few coordinates, a coordinate that is
+     * not finite, a face of two vertices, a vertex reference that is not one. */
+    {"not_a_number.obj", "v 0 0 0\nv 1 x 0\n", RQ_STATUS_OBJ_MALFORMED,
+     {"not_a_number.obj:2: ", "\"x\" is not a number", NULL}},
+    {"short_vertex.obj", "# one comment line\nv 0 0\n", RQ_STATUS_OBJ_MALFORMED,
+     {"short_vertex.obj:2: ", "got 2 values", NULL}},
+    {"nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n", RQ_STATUS_OBJ_MALFORMED,
+     {"nan.obj:3: ", "not finite", NULL}},
+    {"two_vertex_face.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", RQ_STATUS_OBJ_MALFORMED,
+     {"two_vertex_face.obj:4: ", "at least 3 vertices", NULL}},
+    {"bad_reference.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2/x 3\n", RQ_STATUS_OBJ_MALFORMED,
+     {"bad_reference.obj:4: ", "\"2/x\"", NULL}},
+    /* Indices out of range: past the vertices, 0, too far back, and a vertex defined only later. */
+    {"bad_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE,
+     {"bad_index.obj:4: ", "index 9 is out of range", "3 vertices"}},
+    {"zero_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 0 1 2\n", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE,
+     {"zero_index.obj:5: ", "index 0", NULL}},
+    {"far_back.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE,
+     {"far_back.obj:4: ", "index -4", NULL}},
+    {"forward.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE,
+     {"forward.obj:3: ", "2 vertices", NULL}},
+};
+
+/* Loads the case's file with rq_obj_load and with rq_obj_load_ex; both must refuse it with its
+ * status and leave *out untouched, and the callback must be told once, with a message that contains
+ * every needle. */
+static void check_refused(const refused_case *r) {
+  if (r->text) {
+    CHECK(write_file(r->path, r->text));
+  }
+  rq_obj *obj = (rq_obj *)test_sentinel();
+  CHECK_STATUS(rq_obj_load(r->path, &obj), r->status);
   CHECK(obj == (rq_obj *)test_sentinel());
-  CHECKF(c.calls == 1, "%s: on_error called %d times", path, c.calls);
-  CHECKF(c.status == want, "%s: on_error got status %u", path, (unsigned)c.status);
-  for (size_t i = 0; i < n; i++) {
-    CHECKF(strstr(c.message, needles[i]) != NULL, "%s: message \"%s\" lacks \"%s\"", path, c.message, needles[i]);
+
+  captured c;
+  rq_obj_load_options opts = capturing(&c);
+  CHECK_STATUS(rq_obj_load_ex(r->path, &opts, &obj), r->status);
+  CHECK(obj == (rq_obj *)test_sentinel());
+  CHECKF(c.calls == 1, "%s: on_error called %d times", r->path, c.calls);
+  CHECKF(c.status == r->status, "%s: on_error got status %u", r->path, (unsigned)c.status);
+  for (size_t i = 0; i < 3 && r->needles[i]; i++) {
+    CHECKF(strstr(c.message, r->needles[i]) != NULL, "%s: message \"%s\" lacks \"%s\"", r->path, c.message,
+           r->needles[i]);
   }
 }
 
 static void test_refused(void) {
-  /* A file that does not exist: the message names it, and there is no line to name. */
-  {
-    const char *needles[] = {"no-such-file.obj: cannot open: "};
-    check_refused("no-such-file.obj", RQ_STATUS_OBJ_UNREADABLE, needles, 1);
-  }
-#if defined(__unix__)
-  /* A directory opens on POSIX systems and fails at the first read. */
-  {
-    const char *needles[] = {".:1: cannot read: "};
-    check_refused(".", RQ_STATUS_OBJ_UNREADABLE, needles, 1);
-  }
-#endif
-
-  /* Malformed lines: a coordinate that is not a number, too few coordinates, a coordinate that is not
-   * finite, a face of two vertices, a vertex reference that is not one. */
-  CHECK(write_file("not_a_number.obj", "v 0 0 0\nv 1 x 0\n"));
-  {
-    const char *needles[] = {"not_a_number.obj:2: ", "\"x\" is not a number"};
-    check_refused("not_a_number.obj", RQ_STATUS_OBJ_MALFORMED, needles, 2);
-  }
-  CHECK(write_file("short_vertex.obj", "# one comment line\nv 0 0\n"));
-  {
-    const char *needles[] = {"short_vertex.obj:2: ", "got 2 values"};
-    check_refused("short_vertex.obj", RQ_STATUS_OBJ_MALFORMED, needles, 2);
-  }
-  CHECK(write_file("nan.obj", "v 0 0 0\nv 1 0 0\nv 0 nan 0\nf 1 2 3\n"));
-  {
-    const char *needles[] = {"nan.obj:3: ", "not finite"};
-    check_refused("nan.obj", RQ_STATUS_OBJ_MALFORMED, needles, 2);
-  }
-  CHECK(write_file("two_vertex_face.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n"));
-  {
-    const char *needles[] = {"two_vertex_face.obj:4: ", "at least 3 vertices"};
-    check_refused("two_vertex_face.obj", RQ_STATUS_OBJ_MALFORMED, needles, 2);
-  }
-  CHECK(write_file("bad_reference.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2/x 3\n"));
-  {
-    const char *needles[] = {"bad_reference.obj:4: ", "\"2/x\""};
-    check_refused("bad_reference.obj", RQ_STATUS_OBJ_MALFORMED, needles, 2);
-  }
-
-  /* Indices out of range: past the vertices, 0, too far back, and a vertex defined only later. */
-  CHECK(write_file("bad_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"));
-  {
-    const char *needles[] = {"bad_index.obj:4: ", "index 9 is out of range", "3 vertices"};
-    check_refused("bad_index.obj", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE, needles, 3);
-  }
-  CHECK(write_file("zero_index.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 0 1 2\n"));
-  {
-    const char *needles[] = {"zero_index.obj:5: ", "index 0"};
-    check_refused("zero_index.obj", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE, needles, 2);
-  }
-  CHECK(write_file("far_back.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n"));
-  {
-    const char *needles[] = {"far_back.obj:4: ", "index -4"};
-    check_refused("far_back.obj", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE, needles, 2);
-  }
-  CHECK(write_file("forward.obj", "v 0 0 0\nv 1 0 0\nf 1 2 3\nv 0 1 0\n"));
-  {
-    const char *needles[] = {"forward.obj:3: ", "2 vertices"};
-    check_refused("forward.obj", RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE, needles, 2);
+  for (size_t i = 0; i < sizeof refused_cases / sizeof refused_cases[0]; i++) {
+    check_refused(&refused_cases[i]);
   }
 
   /* NULL arguments: refused, and the callback says which. */
   {
     captured c;
-    memset(&c, 0, sizeof c);
-    rq_obj_load_options opts;
-    rq_obj_load_options_init(&opts);
-    opts.on_error = capture;
-    opts.user = &c;
+    rq_obj_load_options opts = capturing(&c);
     rq_obj *obj = (rq_obj *)test_sentinel();
     CHECK_STATUS(rq_obj_load_ex(NULL, &opts, &obj), RQ_STATUS_NULL_ARGUMENT);
     CHECK(obj == (rq_obj *)test_sentinel());
@@ -250,8 +237,6 @@ static void test_options(void) {
 
   /* A caller whose struct ends before on_error: the callback is not read, let alone called. The
    * struct sits at the very end of a guarded page, so a read past struct_size faults. */
-  captured c;
-  memset(&c, 0, sizeof c);
   guarded g = guarded_alloc(sizeof(uint32_t));
   uint32_t small = (uint32_t)sizeof(uint32_t);
   memcpy(g.p, &small, sizeof small);
@@ -261,10 +246,9 @@ static void test_options(void) {
   CHECK(obj == (rq_obj *)test_sentinel());
   guarded_free(&g);
 
-  /* The full struct, with the callback set: told once on failure, never on success. */
-  rq_obj_load_options_init(&opts);
-  opts.on_error = capture;
-  opts.user = &c;
+  /* The full struct, with the callback set: never told on success. */
+  captured c;
+  opts = capturing(&c);
   obj = NULL;
   CHECK_STATUS(rq_obj_load_ex("tiny.obj", &opts, &obj), RQ_STATUS_OK);
   CHECK(c.calls == 0);
