@@ -97,13 +97,13 @@ pub fn load_obj(path: impl AsRef<Path>) -> Result<MeshData, ObjError> {
 pub fn parse_obj(mut reader: impl BufRead, path: &Path) -> Result<MeshData, ObjError> {
     let mut mesh = MeshData::default();
     let mut line = Vec::new();
-    let mut number = 0u64;
+    let mut line_no = 0u64;
     loop {
-        number += 1;
+        line_no += 1;
         let fail = |kind, detail: String| ObjError {
             kind,
             path: path.to_path_buf(),
-            line: Some(number),
+            line: Some(line_no),
             detail,
         };
         line.clear();

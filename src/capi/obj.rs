@@ -142,28 +142,28 @@ pub unsafe extern "C" fn rq_obj_load_ex(
                 ),
             )
         };
-        let refuse = |status, text: &str| refuse(on_error, user, status, text);
+        let fail = |status, text: &str| refuse(on_error, user, status, text);
         if path.is_null() || out.is_null() {
             let text = if path.is_null() {
                 "path is NULL"
             } else {
                 "out is NULL"
             };
-            return refuse(rq_status::RQ_STATUS_NULL_ARGUMENT, text);
+            return fail(rq_status::RQ_STATUS_NULL_ARGUMENT, text);
         }
         // SAFETY: path is NUL-terminated (contract).
         let path = unsafe { CStr::from_ptr(path) };
         let Some(os) = os_path(path) else {
             let text = std::format!("{}: the path is not UTF-8", path.to_string_lossy());
-            return refuse(rq_status::RQ_STATUS_INVALID_ARGUMENT, &text);
+            return fail(rq_status::RQ_STATUS_INVALID_ARGUMENT, &text);
         };
         let mesh = match crate::obj::load_obj(os) {
             Ok(mesh) => mesh,
-            Err(e) => return refuse(e.kind.into(), &e.to_string()),
+            Err(e) => return fail(e.kind.into(), &e.to_string()),
         };
         let Some(b) = try_box(mesh) else {
             let text = std::format!("{}: out of memory for the mesh handle", os.display());
-            return refuse(rq_status::RQ_STATUS_OUT_OF_MEMORY, &text);
+            return fail(rq_status::RQ_STATUS_OUT_OF_MEMORY, &text);
         };
         // SAFETY: out is writable (contract).
         unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(b) as *mut rq_obj) };
