@@ -90,6 +90,9 @@ static void test_versions_and_numbers(void) {
   CHECK(RQ_STATUS_CALIB_TRUNCATED == 202);
   CHECK(RQ_STATUS_CALIB_CHECKSUM == 203);
   CHECK(RQ_STATUS_CALIB_VALUE_OUT_OF_RANGE == 204);
+  CHECK(RQ_STATUS_OBJ_UNREADABLE == 300);
+  CHECK(RQ_STATUS_OBJ_MALFORMED == 301);
+  CHECK(RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE == 302);
   CHECK(RQ_STATUS_PANIC == 900);
   CHECK(RQ_STATUS_INTERNAL == 901);
   CHECK(RQ_STRUCTURE_AUTO == 0);
@@ -165,9 +168,10 @@ static void test_layouts(void) {
 }
 
 static void test_status_strings(void) {
-  static const uint32_t known[] = {0, 1, 2, 3, 4, 5, 6, 100, 101, 102, 200, 201, 202, 203, 204, 900, 901};
-  static const uint32_t unknown[] = {7, 8, 99, 103, 199, 205, 899, 902, 1000, 0x7FFFFFFFu, 0x80000000u,
-                                     UINT32_MAX};
+  static const uint32_t known[] = {0, 1, 2, 3, 4, 5, 6, 100, 101, 102, 200, 201, 202, 203, 204, 300, 301, 302,
+                                   900, 901};
+  static const uint32_t unknown[] = {7, 8, 99, 103, 199, 205, 299, 303, 899, 902, 1000,
+                                     0x7FFFFFFFu, 0x80000000u, UINT32_MAX};
   const size_t nk = sizeof known / sizeof known[0];
   const char *unknown_text = rq_status_str(12345);
   CHECK(unknown_text != NULL && unknown_text[0] != '\0');

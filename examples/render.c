@@ -56,10 +56,20 @@ static const char *status_name(rq_status s) {
   case RQ_STATUS_OUT_OF_MEMORY: return "RQ_STATUS_OUT_OF_MEMORY";
   case RQ_STATUS_MEMORY_LIMIT: return "RQ_STATUS_MEMORY_LIMIT";
   case RQ_STATUS_CANCELLED: return "RQ_STATUS_CANCELLED";
+  case RQ_STATUS_OBJ_UNREADABLE: return "RQ_STATUS_OBJ_UNREADABLE";
+  case RQ_STATUS_OBJ_MALFORMED: return "RQ_STATUS_OBJ_MALFORMED";
+  case RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE: return "RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE";
   case RQ_STATUS_PANIC: return "RQ_STATUS_PANIC";
   case RQ_STATUS_INTERNAL: return "RQ_STATUS_INTERNAL";
   default: return "RQ_STATUS_(other)";
   }
+}
+
+/* on_error for rq_obj_load_ex: the message names the file and the line ("teapot.obj:12: ..."). */
+static void print_obj_error(void *user, rq_status status, const char *message) {
+  (void)user;
+  (void)status;
+  fprintf(stderr, "render: %s\n", message);
 }
 
 static int report_failure(const char *what, rq_status s) {
@@ -169,11 +179,14 @@ int main(int argc, char **argv) {
   rq_status s;
 
   /* 1. Load the OBJ (all objects merged, polygons fanned into triangles) and describe it. The
-   *    description points into the rq_obj, so it is valid until rq_obj_free. */
-  s = rq_obj_load(scene_path, &obj);
+   *    description points into the rq_obj, so it is valid until rq_obj_free. A refused file is
+   *    explained through on_error, which names the file and the line. */
+  rq_obj_load_options load_options;
+  rq_obj_load_options_init(&load_options);
+  load_options.on_error = print_obj_error;
+  s = rq_obj_load_ex(scene_path, &load_options, &obj);
   if (s != RQ_STATUS_OK) {
-    fprintf(stderr, "render: cannot load %s\n", scene_path);
-    exit_code = report_failure("rq_obj_load", s);
+    exit_code = report_failure("rq_obj_load_ex", s);
     goto done;
   }
   rq_mesh_desc mesh;

@@ -52,6 +52,12 @@ enum rq_status
   RQ_STATUS_CALIB_CHECKSUM = 203,
   // Calibration blob: a constant is not finite or out of range.
   RQ_STATUS_CALIB_VALUE_OUT_OF_RANGE = 204,
+  // OBJ helper: the file cannot be opened or read (missing, a directory, no permission).
+  RQ_STATUS_OBJ_UNREADABLE = 300,
+  // OBJ helper: a `v` or `f` line is malformed (too few values, not a number, not finite).
+  RQ_STATUS_OBJ_MALFORMED = 301,
+  // OBJ helper: a face names vertex 0 or a vertex not defined on an earlier line.
+  RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE = 302,
   // A panic was caught at the boundary (a bug in rayq).
   RQ_STATUS_PANIC = 900,
   // An internal invariant failed (a bug in rayq).
@@ -145,6 +151,24 @@ typedef struct rq_allocator {
   rq_free_fn free;
 } rq_allocator;
 
+// Error callback: told the status and a NUL-terminated message that lives only during the call.
+typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
+
+#if defined(RQ_WITH_OBJ)
+// Options of `rq_obj_load_ex`. Fill with `rq_obj_load_options_init`, then set what you need; the
+// library reads only the fields the caller's `struct_size` covers (the others keep their defaults).
+typedef struct rq_obj_load_options {
+  // `sizeof(rq_obj_load_options)` as the caller knows it.
+  uint32_t struct_size;
+  // Called once when the load fails, on the calling thread, with the status and a message that
+  // names the file and, for what is wrong inside it, the line: `path:line: what` (valid only
+  // during the call). NULL = not called.
+  rq_error_fn on_error;
+  // Passed to `on_error`.
+  void *user;
+} rq_obj_load_options;
+#endif
+
 // An indexed triangle mesh in the caller's memory. The build copies what it needs.
 typedef struct rq_mesh_desc {
   // Vertex data: xyz (three floats) at the start of each `vertex_stride`-byte record. Need not be
@@ -175,9 +199,6 @@ typedef struct rq_ray {
   // Largest accepted t (may be INFINITY).
   float tmax;
 } rq_ray;
-
-// Error callback: told the status and a NUL-terminated message that lives only during the call.
-typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
 
 // Memory monitor: told the bytes a build would hold after the allocation it is about to make;
 // returns true to allow it, false to cancel the build.
@@ -310,12 +331,39 @@ const struct rq_calibration *rq_calibration_builtin(void);
 void rq_calibration_free(struct rq_calibration *calib);
 
 #if defined(RQ_WITH_OBJ)
-// Loads an OBJ file (all objects merged, polygons fanned into triangles).
-// `RQ_STATUS_INVALID_ARGUMENT` when the file cannot be read or parsed.
+// Fills `opts` with the defaults (no error callback). Does nothing when `opts` is NULL.
+//
+// # Safety
+// `opts` is NULL or points to writable memory of `sizeof(rq_obj_load_options)` bytes.
+void rq_obj_load_options_init(struct rq_obj_load_options *opts);
+#endif
+
+#if defined(RQ_WITH_OBJ)
+// Loads an OBJ file (all objects merged, polygons fanned into triangles; docs/shipping.md says what
+// is read and what is refused). The same as `rq_obj_load_ex(path, NULL, out)`: the status says why
+// a load failed, `rq_obj_load_ex` also gives the file and line.
 //
 // # Safety
 // `path` is a NUL-terminated string; `out` is writable.
 rq_status rq_obj_load(const char *path, struct rq_obj **out);
+#endif
+
+#if defined(RQ_WITH_OBJ)
+// Loads an OBJ file as `rq_obj_load` does; `opts` NULL means defaults. On success `*out` receives
+// the mesh; on failure `*out` is untouched and `on_error` (if set) is told why. Statuses:
+// `RQ_STATUS_OBJ_UNREADABLE` (missing, a directory, no permission, a read error),
+// `RQ_STATUS_OBJ_MALFORMED` (a `v` or `f` line with too few values, a token that is not a number or
+// index, a non-finite coordinate), `RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE` (a face names vertex 0 or one
+// not defined on an earlier line), `RQ_STATUS_INVALID_MESH` (more vertices than `uint32_t` indices
+// reach), `RQ_STATUS_OUT_OF_MEMORY`, `RQ_STATUS_NULL_ARGUMENT`, and `RQ_STATUS_INVALID_ARGUMENT`
+// for a path that is not UTF-8 where the OS wants UTF-8.
+//
+// # Safety
+// `path` is a NUL-terminated string; `opts` is NULL or readable for its `struct_size` bytes;
+// `out` is writable.
+rq_status rq_obj_load_ex(const char *path,
+                         const struct rq_obj_load_options *opts,
+                         struct rq_obj **out);
 #endif
 
 #if defined(RQ_WITH_OBJ)

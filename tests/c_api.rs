@@ -611,6 +611,34 @@ fn example_render() {
         "{}",
         ran.describe("render accepted a missing scene")
     );
+    // The OBJ helper's message reaches the user: the file, the line, the status's name.
+    for (name, text, needles) in [
+        (
+            "no-such-scene.obj",
+            None,
+            &["no-such-scene.obj: cannot open", "RQ_STATUS_OBJ_UNREADABLE"][..],
+        ),
+        (
+            "broken.obj",
+            Some("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 7\n"),
+            &[
+                "broken.obj:4: face vertex index 7",
+                "RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE",
+            ][..],
+        ),
+    ] {
+        if let Some(text) = text {
+            fs::write(dir.join(name), text).expect("write the broken scene");
+        }
+        let ran = run_program(&exe, &dir, &[name, "x.ppm"]);
+        for needle in needles {
+            assert!(
+                !ran.success && ran.stderr.contains(needle),
+                "{}",
+                ran.describe(&format!("render {name}: no {needle:?} on stderr"))
+            );
+        }
+    }
 }
 
 // ---- embedded and plugin builds (docs/embedded.md) ---------------------------------------------

@@ -3,6 +3,22 @@
 //! scene is immutable after build and may be queried from many threads; no panic crosses the boundary.
 #![allow(non_camel_case_types)]
 
+/// Reads field `$field` (of type `$ty`) of the `$struct` at `$p` when the caller's `$size` (its
+/// `struct_size`) covers the whole field, else gives `$default`: how every growing options struct is
+/// read, so a caller built against an older, shorter struct never has bytes past its end read.
+/// Expands to an `unsafe` read; the caller vouches that `$p` points to `$size` readable bytes.
+macro_rules! read_field {
+    ($struct:ty, $p:expr, $size:expr, $field:ident, $ty:ty, $default:expr) => {{
+        let offset = core::mem::offset_of!($struct, $field);
+        if $size >= offset + core::mem::size_of::<$ty>() {
+            // SAFETY: the caller's struct_size says these bytes are part of its struct.
+            unsafe { core::ptr::read_unaligned(($p as *const u8).add(offset) as *const $ty) }
+        } else {
+            $default
+        }
+    }};
+}
+
 mod allocator;
 /// The `bare-rt` global allocator (declares C's malloc/free, which must stay out of the header).
 ///
@@ -144,6 +160,9 @@ fn status_text(status: u32) -> &'static [u8] {
         202 => b"calibration blob: truncated or wrong length\0",
         203 => b"calibration blob: checksum mismatch\0",
         204 => b"calibration blob: value out of range\0",
+        300 => b"OBJ file: cannot be opened or read\0",
+        301 => b"OBJ file: malformed line\0",
+        302 => b"OBJ file: face index out of range\0",
         900 => b"a panic was caught at the C boundary (a bug in rayq)\0",
         901 => b"internal error (a bug in rayq)\0",
         _ => b"unknown status\0",

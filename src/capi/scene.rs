@@ -56,21 +56,11 @@ struct Options {
     memory_monitor: Option<MemoryMonitor>,
 }
 
-/// Reads field `$field` of type `$ty` from `*$p` when `$size` covers it, else keeps `$default`.
+/// Reads field `$field` of an `rq_build_options` at `$p` when `$size` covers it, else `$default`.
 macro_rules! read_covered {
-    ($p:expr, $size:expr, $field:ident, $ty:ty, $default:expr) => {{
-        let end = offset_of!(rq_build_options, $field) + size_of::<$ty>();
-        if $size >= end {
-            // SAFETY: the caller's struct_size says these bytes are part of its options struct.
-            unsafe {
-                ptr::read_unaligned(
-                    ($p as *const u8).add(offset_of!(rq_build_options, $field)) as *const $ty
-                )
-            }
-        } else {
-            $default
-        }
-    }};
+    ($p:expr, $size:expr, $field:ident, $ty:ty, $default:expr) => {
+        read_field!(rq_build_options, $p, $size, $field, $ty, $default)
+    };
 }
 
 /// Reads the options, never materialising an out-of-range enum.

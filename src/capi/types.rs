@@ -36,6 +36,12 @@ pub enum rq_status {
     RQ_STATUS_CALIB_CHECKSUM = 203,
     /// Calibration blob: a constant is not finite or out of range.
     RQ_STATUS_CALIB_VALUE_OUT_OF_RANGE = 204,
+    /// OBJ helper: the file cannot be opened or read (missing, a directory, no permission).
+    RQ_STATUS_OBJ_UNREADABLE = 300,
+    /// OBJ helper: a `v` or `f` line is malformed (too few values, not a number, not finite).
+    RQ_STATUS_OBJ_MALFORMED = 301,
+    /// OBJ helper: a face names vertex 0 or a vertex not defined on an earlier line.
+    RQ_STATUS_OBJ_INDEX_OUT_OF_RANGE = 302,
     /// A panic was caught at the boundary (a bug in rayq).
     RQ_STATUS_PANIC = 900,
     /// An internal invariant failed (a bug in rayq).
