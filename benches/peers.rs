@@ -251,7 +251,7 @@ fn bench(c: &mut Criterion) {
                     total
                 })
             });
-            let prims = first.prims(&all_rays);
+            let prims: Vec<u32> = first.hits(&all_rays).iter().map(|h| h.0).collect();
             rows.push(Row {
                 scene: name,
                 triangles: tris,
@@ -272,9 +272,11 @@ fn bench(c: &mut Criterion) {
         if let (Some(device), true) = (embree.as_ref(), name == "dragon_res2") {
             let (cpu0, wall0) = (process_cpu_seconds(), Instant::now());
             for _ in 0..3 {
-                drop(black_box(
-                    device.build(&data, embree3::RTC_BUILD_QUALITY_HIGH),
-                ));
+                drop(black_box(device.build(
+                    &data,
+                    embree3::RTC_BUILD_QUALITY_HIGH,
+                    false,
+                )));
             }
             let wall = wall0.elapsed().as_secs_f64();
             if let (Some(a), Some(b)) = (cpu0, process_cpu_seconds()) {

@@ -41,6 +41,8 @@ pub mod embree3 {
     pub const RTC_BUILD_QUALITY_LOW: c_uint = 0;
     pub const RTC_BUILD_QUALITY_MEDIUM: c_uint = 1;
     pub const RTC_BUILD_QUALITY_HIGH: c_uint = 2;
+    /// Embree 3 `RTC_SCENE_FLAG_ROBUST` (rtcore_scene.h: 1 << 2).
+    pub const RTC_SCENE_FLAG_ROBUST: c_uint = 1 << 2;
     pub const RTC_GEOMETRY_TYPE_TRIANGLE: c_uint = 0;
     pub const RTC_BUFFER_TYPE_INDEX: c_uint = 0;
     pub const RTC_BUFFER_TYPE_VERTEX: c_uint = 1;
@@ -114,6 +116,7 @@ pub mod embree3 {
         pub fn rtcNewScene(device: RTCDevice) -> RTCScene;
         pub fn rtcReleaseScene(scene: RTCScene);
         pub fn rtcSetSceneBuildQuality(scene: RTCScene, quality: c_uint);
+        pub fn rtcSetSceneFlags(scene: RTCScene, flags: c_uint);
         pub fn rtcNewGeometry(device: RTCDevice, kind: c_uint) -> RTCGeometry;
         pub fn rtcReleaseGeometry(geometry: RTCGeometry);
         pub fn rtcSetGeometryBuildQuality(geometry: RTCGeometry, quality: c_uint);
@@ -161,8 +164,14 @@ impl EmbreeDevice {
         format!("{}.{}.{}", v / 10000, v / 100 % 100, v % 100)
     }
 
-    /// A scene of one triangle geometry built at `quality` from the caller's arrays.
-    pub fn build(&self, data: &MeshData, quality: std::ffi::c_uint) -> Result<EmbreeScene, String> {
+    /// A scene of one triangle geometry built at `quality` from the caller's arrays, with
+    /// `RTC_SCENE_FLAG_ROBUST` when `robust`.
+    pub fn build(
+        &self,
+        data: &MeshData,
+        quality: std::ffi::c_uint,
+        robust: bool,
+    ) -> Result<EmbreeScene, String> {
         use embree3::*;
         // SAFETY: every handle comes from Embree and is checked; the buffers Embree returns hold
         // exactly `item_count` items of the declared stride (Embree pads vertex buffers itself), so
@@ -174,6 +183,9 @@ impl EmbreeDevice {
             }
             let scene = EmbreeScene(scene);
             rtcSetSceneBuildQuality(scene.0, quality);
+            if robust {
+                rtcSetSceneFlags(scene.0, RTC_SCENE_FLAG_ROBUST);
+            }
             let geom = rtcNewGeometry(self.0, RTC_GEOMETRY_TYPE_TRIANGLE);
             if geom.is_null() {
                 return Err(self.error("rtcNewGeometry"));
@@ -230,9 +242,9 @@ impl Drop for EmbreeDevice {
 pub struct EmbreeScene(embree3::RTCScene);
 
 impl EmbreeScene {
-    /// Closest hit with `rtcIntersect1`; returns the primitive id or `Hit::INVALID_ID`.
+    /// Closest hit with `rtcIntersect1`: the primitive id (or `Hit::INVALID_ID`) and its `t`.
     #[inline]
-    fn intersect(&self, ray: &Ray) -> u32 {
+    fn intersect(&self, ray: &Ray) -> (u32, f32) {
         use embree3::*;
         let mut rh = RTCRayHit {
             ray: RTCRay {
@@ -264,9 +276,9 @@ impl EmbreeScene {
         // SAFETY: a committed scene, an initialised context and ray/hit on the stack.
         unsafe { rtcIntersect1(self.0, &mut ctx, &mut rh) };
         if rh.hit.geom_id == RTC_INVALID_GEOMETRY_ID {
-            Hit::INVALID_ID
+            (Hit::INVALID_ID, f32::INFINITY)
         } else {
-            rh.hit.prim_id
+            (rh.hit.prim_id, rh.ray.tfar)
         }
     }
 }
@@ -311,7 +323,7 @@ impl ObvhsScene {
 
     /// Closest hit; returns the original primitive id or `Hit::INVALID_ID`.
     #[inline]
-    fn intersect(&self, ray: &Ray) -> u32 {
+    fn intersect(&self, ray: &Ray) -> (u32, f32) {
         let r = obvhs::ray::Ray::new(
             ray.org.to_array().into(),
             ray.dir.to_array().into(),
@@ -323,9 +335,9 @@ impl ObvhsScene {
             .bvh
             .ray_traverse(r, &mut hit, |r, id| self.tris[id].intersect(r))
         {
-            self.bvh.primitive_indices[hit.primitive_id as usize]
+            (self.bvh.primitive_indices[hit.primitive_id as usize], hit.t)
         } else {
-            Hit::INVALID_ID
+            (Hit::INVALID_ID, f32::INFINITY)
         }
     }
 }
@@ -425,7 +437,7 @@ impl BvhScene {
 
     /// Closest hit; returns the original primitive id or `Hit::INVALID_ID`.
     #[inline]
-    fn intersect(&self, ray: &Ray) -> u32 {
+    fn intersect(&self, ray: &Ray) -> (u32, f32) {
         // The crate's ray with the caller's direction as is (`Ray::new` would normalise it), so
         // box distances are in the same units as `tmin`/`tmax`. Its box tests start at t = 0.
         let r = bvh::ray::Ray {
@@ -446,7 +458,11 @@ impl BvhScene {
                 }
             }
         }
-        best
+        if best == Hit::INVALID_ID {
+            (best, f32::INFINITY)
+        } else {
+            (best, best_t)
+        }
     }
 }
 
@@ -457,6 +473,8 @@ impl BvhScene {
 pub enum Kind {
     Rayq(Structure),
     Embree(std::ffi::c_uint),
+    /// Embree with `RTC_SCENE_FLAG_ROBUST` (its watertight-er mode) at a build quality.
+    EmbreeRobust(std::ffi::c_uint),
     Obvhs(&'static str, obvhs::BvhBuildParams),
     Bvh,
 }
@@ -468,6 +486,10 @@ impl Kind {
             Kind::Rayq(_) => "rayq grid".into(),
             Kind::Embree(q) => format!(
                 "Embree {}",
+                ["LOW", "MEDIUM", "HIGH"].get(q as usize).unwrap_or(&"?")
+            ),
+            Kind::EmbreeRobust(q) => format!(
+                "Embree {} robust",
                 ["LOW", "MEDIUM", "HIGH"].get(q as usize).unwrap_or(&"?")
             ),
             Kind::Obvhs(preset, _) => format!("obvhs {preset}"),
@@ -487,7 +509,11 @@ impl Kind {
                     .map_err(|e| format!("{e:?}"))
             }
             Kind::Embree(quality) => match embree {
-                Some(device) => device.build(data, quality).map(Built::Embree),
+                Some(device) => device.build(data, quality, false).map(Built::Embree),
+                None => Err("no Embree device".into()),
+            },
+            Kind::EmbreeRobust(quality) => match embree {
+                Some(device) => device.build(data, quality, true).map(Built::Embree),
                 None => Err("no Embree device".into()),
             },
             Kind::Obvhs(_, params) => Ok(Built::Obvhs(ObvhsScene::build(data, params))),
@@ -513,23 +539,30 @@ impl Built {
             Built::Rayq(s) => rays.iter().filter(|r| s.intersect(r).is_hit()).count(),
             Built::Embree(s) => rays
                 .iter()
-                .filter(|r| s.intersect(r) != Hit::INVALID_ID)
+                .filter(|r| s.intersect(r).0 != Hit::INVALID_ID)
                 .count(),
             Built::Obvhs(s) => rays
                 .iter()
-                .filter(|r| s.intersect(r) != Hit::INVALID_ID)
+                .filter(|r| s.intersect(r).0 != Hit::INVALID_ID)
                 .count(),
             Built::Bvh(s) => rays
                 .iter()
-                .filter(|r| s.intersect(r) != Hit::INVALID_ID)
+                .filter(|r| s.intersect(r).0 != Hit::INVALID_ID)
                 .count(),
         }
     }
 
-    /// The primitive hit by each ray (`Hit::INVALID_ID` for a miss).
-    pub fn prims(&self, rays: &[Ray]) -> Vec<u32> {
+    /// The primitive hit by each ray (`Hit::INVALID_ID` for a miss) and the `t` the structure
+    /// reports for it (`+∞` for a miss).
+    pub fn hits(&self, rays: &[Ray]) -> Vec<(u32, f32)> {
         match self {
-            Built::Rayq(s) => rays.iter().map(|r| s.intersect(r).prim).collect(),
+            Built::Rayq(s) => rays
+                .iter()
+                .map(|r| {
+                    let h = s.intersect(r);
+                    (h.prim, h.t)
+                })
+                .collect(),
             Built::Embree(s) => rays.iter().map(|r| s.intersect(r)).collect(),
             Built::Obvhs(s) => rays.iter().map(|r| s.intersect(r)).collect(),
             Built::Bvh(s) => rays.iter().map(|r| s.intersect(r)).collect(),

@@ -13,10 +13,10 @@
 //! total time of grid only, kd-tree only, the selector with R known, the selector with R unknown
 //! (online switch), and the peers; the regret against the oracle (the better fixed choice knowing R).
 
+mod accuracy;
 #[cfg(feature = "peers")]
 #[path = "../../benches/shared/peer_structures.rs"]
 mod peer_structures;
-mod reference;
 mod svg;
 
 use std::fmt::Write as _;
@@ -33,7 +33,9 @@ use rayq::select::validate::{
     best_variant, cross_validated_break_even, cross_validated_errors, median, relative_error,
     GridCost, VARIANTS,
 };
-use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, Ray, TriMesh, UniformGrid};
+#[cfg(feature = "peers")]
+use rayq::Ray;
+use rayq::{GridParams, Hit, KdTree, KdTreeParams, MemoryBudget, TriMesh, UniformGrid};
 use svg::{Chart, Mark, Series};
 
 /// Camera sides of the selector's sample rays tried for the speed/accuracy chart.
@@ -164,12 +166,12 @@ fn scene_set(quick: bool) -> Vec<SceneSpec> {
     v
 }
 
-/// A peer's build and per-ray time (ns) and its hit accuracy against the f64 reference.
+/// A peer's build and per-ray time (ns) and its hit accuracy against the exact answers.
 struct PeerResult {
     label: String,
     build_ns: f64,
     ray_ns: f64,
-    wrong: f64,
+    accuracy: Option<accuracy::Accuracy>,
 }
 
 /// What the evaluation measured on one scene.
@@ -183,31 +185,16 @@ struct Measured {
     samples: Vec<(SceneFeatures, f64)>,
     /// The same sample rays through the kd-tree (for the selector's check after building it).
     kd_samples: Vec<(SceneFeatures, f64)>,
-    /// Share of reference rays on which rayq's answer is not an exact one (None: not checked).
-    rayq_wrong: Option<f64>,
+    /// rayq's accuracy against the exact answers, grid and kd-tree (None: not checked).
+    rayq_accuracy: Option<[accuracy::Accuracy; 2]>,
     peers: Vec<PeerResult>,
 }
 
-/// Rays the accuracy check uses: the first `n` of the workload (camera rays and bounces mixed).
-fn accuracy_rays(rays: &[Ray], n: usize) -> Vec<Ray> {
-    let step = (rays.len() / n.max(1)).max(1);
-    rays.iter().step_by(step).take(n).copied().collect()
-}
-
-/// Share of `rays` on which `prims` is not an exact answer.
-fn wrong_share(
-    mesh: &TriMesh,
-    rays: &[Ray],
-    reference: &[reference::Answer],
-    prims: &[u32],
-) -> f64 {
-    let bad = rays
-        .iter()
-        .zip(reference)
-        .zip(prims)
-        .filter(|((r, want), &p)| !reference::agrees(mesh, r, **want, p))
-        .count();
-    bad as f64 / rays.len().max(1) as f64
+/// The accuracy check: its rays, their exact answers, and whether the mesh is closed.
+struct Check {
+    rays: accuracy::CheckRays,
+    want: Vec<Hit>,
+    closed: bool,
 }
 
 #[cfg(feature = "peers")]
@@ -215,7 +202,7 @@ fn peers(
     data: &MeshData,
     mesh: &TriMesh,
     rays: &[Ray],
-    check: Option<(&[Ray], &[reference::Answer])>,
+    check: Option<&Check>,
     repeats: u32,
     device: Option<&peer_structures::EmbreeDevice>,
 ) -> Vec<PeerResult> {
@@ -225,6 +212,7 @@ fn peers(
         Kind::Embree(embree3::RTC_BUILD_QUALITY_LOW),
         Kind::Embree(embree3::RTC_BUILD_QUALITY_MEDIUM),
         Kind::Embree(embree3::RTC_BUILD_QUALITY_HIGH),
+        Kind::EmbreeRobust(embree3::RTC_BUILD_QUALITY_MEDIUM),
         Kind::Obvhs("medium_build", obvhs::BvhBuildParams::medium_build()),
         Kind::Bvh,
     ];
@@ -233,14 +221,13 @@ fn peers(
         let (build_ns, built) = median_ns(repeats, || kind.build(data, device));
         let Ok(built) = built else { continue };
         let (t, _) = median_ns(repeats, || built.count_hits(rays));
-        let wrong = check.map_or(f64::NAN, |(r, want)| {
-            wrong_share(mesh, r, want, &built.prims(r))
-        });
+        let accuracy = check
+            .map(|c| accuracy::judge(mesh, &c.rays, &c.want, &built.hits(&c.rays.rays), c.closed));
         out.push(PeerResult {
             label: kind.label(),
             build_ns,
             ray_ns: t / rays.len().max(1) as f64,
-            wrong,
+            accuracy,
         });
     }
     out
@@ -268,21 +255,32 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     };
     let samples = timed(&|p| sample_grid(&grid, &mesh, None, p));
     let kd_samples = timed(&|p| sample_kdtree(&tree, &mesh, None, p));
-    // Accuracy against the f64 reference (brute force, so only where it is affordable).
+    // Accuracy against the exact answers (brute force, so only where it is affordable).
     let limit = if quick { 20_000 } else { 130_000 };
-    let check_rays = accuracy_rays(&rays, if quick { 500 } else { 1500 });
-    let reference: Option<Vec<reference::Answer>> = (mesh.len() <= limit).then(|| {
-        check_rays
-            .iter()
-            .map(|r| reference::closest(&mesh, r))
-            .collect()
+    let check = (mesh.len() <= limit).then(|| {
+        let (mixed, aimed) = if quick { (500, 300) } else { (1500, 600) };
+        let rays = accuracy::CheckRays::new(&mesh, &rays, mixed, aimed, params.seed ^ 0xacc);
+        let want = accuracy::reference(&mesh, &rays.rays);
+        Check {
+            rays,
+            want,
+            closed: accuracy::is_closed(&mesh),
+        }
     });
-    let rayq_wrong = reference.as_ref().map(|want| {
-        let prims: Vec<u32> = check_rays
-            .iter()
-            .map(|r| rayq::RayQuery::intersect(&grid, &mesh, r).prim)
-            .collect();
-        wrong_share(&mesh, &check_rays, want, &prims)
+    let rayq_accuracy = check.as_ref().map(|c| {
+        let judge = |s: &dyn rayq::RayQuery| {
+            let answers: Vec<(u32, f32)> = c
+                .rays
+                .rays
+                .iter()
+                .map(|r| {
+                    let h = s.intersect(&mesh, r);
+                    (h.prim, h.t)
+                })
+                .collect();
+            accuracy::judge(&mesh, &c.rays, &c.want, &answers, c.closed)
+        };
+        [judge(&grid), judge(&tree)]
     });
     #[cfg(feature = "peers")]
     let peers = {
@@ -294,7 +292,7 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
                 &spec.data,
                 &mesh,
                 &rays,
-                reference.as_ref().map(|w| (&check_rays[..], &w[..])),
+                check.as_ref(),
                 params.repeats,
                 d.as_ref(),
             )
@@ -310,7 +308,7 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
         spread,
         samples,
         kd_samples,
-        rayq_wrong,
+        rayq_accuracy,
         peers,
     })
 }
@@ -812,42 +810,84 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     let _ = writeln!(md, "\n![model terms against error](evaluation_terms.svg)\n");
 
     // Rays/s vs hit accuracy.
-    let mut acc: Vec<(String, Vec<f64>, Vec<f64>)> = vec![
-        ("rayq grid".into(), vec![], vec![]),
-        ("rayq kd-tree".into(), vec![], vec![]),
-    ];
+    struct Row {
+        label: String,
+        speed: Vec<f64>,
+        wrong: Vec<f64>,
+        wrong_workload: Vec<f64>,
+        leaks: Vec<f64>,
+    }
+    let row = |label: &str| Row {
+        label: label.into(),
+        speed: vec![],
+        wrong: vec![],
+        wrong_workload: vec![],
+        leaks: vec![],
+    };
+    let mut acc: Vec<Row> = vec![row("rayq grid"), row("rayq kd-tree")];
+    let mut closed_scenes = 0;
     for m in results {
-        if let Some(w) = m.rayq_wrong {
-            acc[0].1.push(1e3 / m.obs.grid_ray_ns);
-            acc[0].2.push(w);
-            acc[1].1.push(1e3 / m.obs.kd_ray_ns);
-            acc[1].2.push(w);
+        if let Some([g, k]) = m.rayq_accuracy {
+            closed_scenes += usize::from(g.leaks.is_some());
+            for (i, (a, ns)) in [(g, m.obs.grid_ray_ns), (k, m.obs.kd_ray_ns)]
+                .into_iter()
+                .enumerate()
+            {
+                acc[i].speed.push(1e3 / ns);
+                acc[i].wrong.push(a.wrong);
+                acc[i].wrong_workload.push(a.wrong_workload);
+                acc[i].leaks.extend(a.leaks);
+            }
         }
         for p in &m.peers {
-            if p.wrong.is_finite() {
-                let i = match acc.iter().position(|a| a.0 == p.label) {
+            if let Some(a) = p.accuracy {
+                let i = match acc.iter().position(|r| r.label == p.label) {
                     Some(i) => i,
                     None => {
-                        acc.push((p.label.clone(), vec![], vec![]));
+                        acc.push(row(&p.label));
                         acc.len() - 1
                     }
                 };
-                acc[i].1.push(1e3 / p.ray_ns);
-                acc[i].2.push(p.wrong);
+                acc[i].speed.push(1e3 / p.ray_ns);
+                acc[i].wrong.push(a.wrong);
+                acc[i].wrong_workload.push(a.wrong_workload);
+                acc[i].leaks.extend(a.leaks);
             }
         }
     }
-    let _ = writeln!(md, "### Speed against hit accuracy\n\nRays whose answer is not an exact one by an f64 brute-force reference (a miss where it hits, a hit where it misses, or a triangle not at its nearest t), on scenes up to 130k triangles; rays/s over all scenes measured (median).\n\n| structure | Mrays/s (median) | wrong answers (mean) |\n|---|---:|---:|");
+    let _ = writeln!(
+        md,
+        "### Speed against hit accuracy\n\nAgainst the exact answers (rayq's brute force, whose test is \
+         checked against an exact integer definition), on scenes up to 130k triangles, for a sample of \
+         the workload's camera and bounce rays plus rays aimed from outside at vertices and edge \
+         midpoints (examples/evaluate/accuracy.rs). *Wrong*: a miss where the exact answer hits, a hit \
+         where it misses, or a triangle the exact test does not hit at the nearest t (ties at the same t \
+         are right); given over all check rays and over the workload's rays alone. *Leaks* ({closed_scenes} \
+         closed meshes): aimed rays whose exact hit is at or before the target but which the structure \
+         reports as a miss or a hit beyond it. Rays/s over all scenes measured (median).\n\n\
+         | structure | Mrays/s (median) | wrong answers (mean) | of them on workload rays | leaks on closed meshes (mean) |\n|---|---:|---:|---:|---:|"
+    );
     let mut speed_series = Vec::new();
-    for (label, speed, wrong) in &mut acc {
-        if speed.is_empty() {
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+    for r in &mut acc {
+        if r.speed.is_empty() {
             continue;
         }
-        let mean_wrong = wrong.iter().sum::<f64>() / wrong.len() as f64;
-        let ms = median(speed);
-        let _ = writeln!(md, "| {label} | {ms:.2} | {:.4} % |", 100.0 * mean_wrong);
+        let (mean_wrong, ms) = (mean(&r.wrong), median(&mut r.speed));
+        let leaks = if r.leaks.is_empty() {
+            "–".to_string()
+        } else {
+            format!("{:.3} %", 100.0 * mean(&r.leaks))
+        };
+        let _ = writeln!(
+            md,
+            "| {} | {ms:.2} | {:.4} % | {:.4} % | {leaks} |",
+            r.label,
+            100.0 * mean_wrong,
+            100.0 * mean(&r.wrong_workload)
+        );
         speed_series.push(Series {
-            label: label.clone(),
+            label: r.label.clone(),
             points: vec![(100.0 * mean_wrong.max(1e-4), ms)],
             mark: Mark::Dots,
         });
@@ -856,7 +896,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         args,
         "evaluation_accuracy.svg",
         &Chart {
-            title: "Rays/s against wrong answers (f64 reference)".into(),
+            title: "Rays/s against wrong answers (exact reference)".into(),
             x_label: "wrong answers (%, mean over scenes; 1e-4 = none seen)".into(),
             y_label: "Mrays/s (median over scenes)".into(),
             log_x: true,
