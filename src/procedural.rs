@@ -27,6 +27,7 @@ pub const NAMES: &[&str] = &[
     "sphere",
     "soup",
     "slivers",
+    "hair",
 ];
 
 impl MeshData {
@@ -522,6 +523,41 @@ pub fn random_slivers(n: usize, seed: u64) -> MeshData {
     mesh
 }
 
+/// `strands` hair-like strands across the unit cube at all angles: each a ribbon of `segments` quads
+/// (two triangles each) 0.001 wide, from a root uniform in the cube along a direction uniform on the
+/// sphere, 0.3 to 1 long, bending a little at every joint, clamped to [0, 1]³. Long thin triangles
+/// (about 100 to 500 times longer than wide) in every orientation: what breaks structures built for
+/// well-shaped triangles.
+///
+/// Triangles: `2·segments·strands`; vertices: `2·(segments + 1)·strands`. Deterministic from `seed`.
+pub fn hair(strands: usize, segments: u32, seed: u64) -> MeshData {
+    let segments = segments.max(1);
+    let mut rng = SplitMix64::new(seed);
+    let per = segments as usize;
+    let mut mesh = MeshData::with_capacity(2 * (per + 1) * strands, 2 * per * strands);
+    let width = 0.001;
+    for _ in 0..strands {
+        let mut p = rng.next_vec3();
+        let mut dir = rng.unit_vector();
+        let step = (0.3 + 0.7 * rng.next_f32()) / segments as f32;
+        // The ribbon's width lies across the strand.
+        let side = dir.any_orthonormal_vector() * (0.5 * width);
+        let mut base = mesh.next_index();
+        mesh.push_vertex((p - side).clamp(Vec3::ZERO, Vec3::ONE));
+        mesh.push_vertex((p + side).clamp(Vec3::ZERO, Vec3::ONE));
+        for _ in 0..segments {
+            p += dir * step;
+            dir = (dir + 0.3 * rng.unit_vector()).normalize_or(dir);
+            mesh.push_vertex((p - side).clamp(Vec3::ZERO, Vec3::ONE));
+            mesh.push_vertex((p + side).clamp(Vec3::ZERO, Vec3::ONE));
+            mesh.indices.push([base, base + 1, base + 2]);
+            mesh.indices.push([base + 2, base + 1, base + 3]);
+            base += 2;
+        }
+    }
+    mesh
+}
+
 /// The scene `name` (one of [`NAMES`]) with parameters chosen so that its triangle count is close to
 /// `approx_tris`: within a factor 2 always, and within a few percent for "rings", "gears", "stadium",
 /// "soup" and "slivers" once `approx_tris` is in the thousands. `None` for an unknown name.
@@ -558,6 +594,7 @@ pub fn by_name(name: &str, approx_tris: usize) -> Option<MeshData> {
         "sphere" => closed_sphere(closest(2, u32::MAX, t, sphere_tris)),
         "soup" => random_soup(t, 0x5eed, (1.0 / math::cbrt(t as f64)) as f32),
         "slivers" => random_slivers(t, 0x5eed),
+        "hair" => hair(t.div_ceil(8), 4, 0x5eed),
         _ => return None,
     })
 }
@@ -613,6 +650,8 @@ mod tests {
         assert_eq!(gears(3, 10).triangle_count(), 3 * 160);
         assert_eq!(random_soup(17, 3, 0.1).triangle_count(), 17);
         assert_eq!(random_slivers(17, 3).triangle_count(), 17);
+        assert_eq!(hair(17, 4, 3).triangle_count(), 17 * 8);
+        assert_eq!(hair(17, 4, 3).vertex_count(), 17 * 10);
     }
 
     #[test]
@@ -670,6 +709,7 @@ mod tests {
         };
         assert!(inside(&random_soup(1000, 7, 0.05)));
         assert!(inside(&random_slivers(1000, 7)));
+        assert!(inside(&hair(1000, 4, 7)));
         let b = teapot_in_stadium(500, 1000).bounds();
         let (lo, hi) = (b.min.to_array(), b.max.to_array());
         assert_eq!((lo, hi), ([-500.0, -300.0, 0.0], [500.0, 300.0, 1.0]));
