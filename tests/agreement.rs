@@ -21,10 +21,25 @@ const GRIDS: [(&str, GridParams); 4] = [
     ),
 ];
 
-/// kd-tree parameter sets: the default, one that splits as deep as it may (tiny leaves, many
-/// straddlers), one that stops early (big leaves), and one with no empty-space bonus.
-const KDTREES: [(&str, KdTreeParams); 4] = [
+/// kd-tree parameter sets: the default, binned splits everywhere, the exact sweep everywhere, one
+/// that splits as deep as it may (tiny leaves, many straddlers), one that stops early (big leaves)
+/// with the indexed layout, and one with no empty-space bonus.
+const KDTREES: [(&str, KdTreeParams); 6] = [
     ("kd-default", KdTreeParams::DEFAULT),
+    (
+        "kd-binned",
+        KdTreeParams {
+            exact_below: 0,
+            ..KdTreeParams::DEFAULT
+        },
+    ),
+    (
+        "kd-exact",
+        KdTreeParams {
+            exact_below: u32::MAX,
+            ..KdTreeParams::DEFAULT
+        },
+    ),
     (
         "kd-deep",
         KdTreeParams {

@@ -852,7 +852,7 @@ fn c_embedded() {
 /// archive and nothing but the C library (x86_64 Linux, gcc 12, Rust 1.95: 235 872 bytes when
 /// first recorded; 252 256 after the grid's slab walk for long slivers, budget raised to 265 000). To raise it on purpose: run `cargo test --test c_api embedded_minimal -- --nocapture`,
 /// note the size it prints, set this to about 5 % above it, and update docs/embedded.md.
-const MINIMAL_PROGRAM_BUDGET: u64 = 300_000;
+const MINIMAL_PROGRAM_BUDGET: u64 = 315_000;
 
 #[test]
 #[cfg(all(target_os = "linux", target_arch = "x86_64"))]

@@ -11,6 +11,7 @@ use crate::ray::{Hit, Ray};
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
 
 mod build;
+mod clip;
 pub mod node;
 mod traverse;
 
@@ -39,6 +40,10 @@ pub struct KdTreeParams {
     /// Bound on leaf references per triangle from clipped straddlers: once the tree would hold more,
     /// nodes stop splitting. At least 1.
     pub max_references_per_triangle: f32,
+    /// Nodes of at most this many triangles choose their split by the exact SAH over every
+    /// candidate plane; larger ones by min-max binning (32 bins per axis): the build-time and
+    /// tree-quality knob.
+    pub exact_below: u32,
     /// How the leaves' triangles are stored for the test (packed copies or ids only).
     pub layout: TriangleLayout,
 }
@@ -55,6 +60,7 @@ impl KdTreeParams {
         max_depth: 0,
         max_leaf_prims: 1,
         max_references_per_triangle: 16.0,
+        exact_below: 1024,
         layout: TriangleLayout::Packed,
     };
 
@@ -119,6 +125,8 @@ pub struct KdTree {
     depth: u32,
     leaves: u32,
     references: usize,
+    budget_leaves: usize,
+    largest_budget_leaf: usize,
 }
 
 impl KdTree {
@@ -142,6 +150,8 @@ impl KdTree {
                 depth: 0,
                 leaves: 1,
                 references: 0,
+                budget_leaves: 0,
+                largest_budget_leaf: 0,
             }
         } else {
             build::build(mesh, params, root, budget)?
@@ -162,6 +172,8 @@ impl KdTree {
             depth: built.depth,
             leaves: built.leaves,
             references: built.references,
+            budget_leaves: built.budget_leaves,
+            largest_budget_leaf: built.largest_budget_leaf,
         })
     }
 
@@ -183,6 +195,12 @@ impl KdTree {
     /// Triangle references held by the leaves (a straddling triangle counts once per leaf).
     pub fn reference_count(&self) -> usize {
         self.references
+    }
+
+    /// Leaves made because their subtree's share of the reference budget ran out, and the largest
+    /// of them in triangles (`(0, 0)` when the budget never ran out).
+    pub fn budget_leaves(&self) -> (usize, usize) {
+        (self.budget_leaves, self.largest_budget_leaf)
     }
 
     /// Bytes the tree holds (nodes, references and their triangle packs).

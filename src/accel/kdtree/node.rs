@@ -2,9 +2,11 @@
 
 /// One kd-tree node in 8 bytes.
 ///
-/// - interior: `a` = the split position's f32 bits; `b` = `above << 2 | axis` (axis 0..=2), where the
-///   child below the plane is the next node in the array (depth-first order) and `above` is the index
-///   of the child above it;
+/// - interior: `a` = the split position's f32 bits; `b` = `children << 4 | empty_above << 3 |
+///   empty_below << 2 | axis` (axis 0..=2), where the children are the nodes `children` (below the
+///   plane) and `children + 1` (above it), side by side so that a ray picks its near child by adding
+///   its direction's sign, and the two flags say that a child is a leaf without triangles, so the
+///   traversal need not visit it;
 /// - leaf: `b` = `count << 2 | 3`; `a` = the offset of the leaf's `count` triangles in the tree's
 ///   primitive array.
 #[repr(C)]
@@ -16,17 +18,24 @@ pub struct KdNode {
 
 const _: () = assert!(core::mem::size_of::<KdNode>() == 8);
 
-/// The largest child index or leaf count a node can hold (30 bits).
+/// The largest leaf count a node can hold (30 bits).
 pub const MAX_NODE_FIELD: u32 = (1 << 30) - 1;
 
+/// The largest index of a node's first child (28 bits: the interior node also holds two flags).
+pub const MAX_CHILD_INDEX: u32 = (1 << 28) - 2;
+
 impl KdNode {
-    /// An interior node splitting `axis` at `split`, whose upper child is node `above`
-    /// (`above <= MAX_NODE_FIELD`, checked by the builder).
+    /// An interior node splitting `axis` at `split`, whose children are nodes `children` (below)
+    /// and `children + 1` (above) (`children <= MAX_CHILD_INDEX`, checked by the builder); `empty`
+    /// says which children are leaves without triangles (lower, upper).
     #[inline]
-    pub fn interior(axis: usize, split: f32, above: u32) -> KdNode {
+    pub fn interior(axis: usize, split: f32, children: u32, empty: (bool, bool)) -> KdNode {
         KdNode {
             a: split.to_bits(),
-            b: (above << 2) | (axis as u32 & 3),
+            b: (children << 4)
+                | (u32::from(empty.1) << 3)
+                | (u32::from(empty.0) << 2)
+                | (axis as u32 & 3),
         }
     }
 
@@ -58,10 +67,16 @@ impl KdNode {
         f32::from_bits(self.a)
     }
 
-    /// The upper child of an interior node.
+    /// The lower child of an interior node (the upper one follows it).
     #[inline(always)]
-    pub fn above(self) -> u32 {
-        self.b >> 2
+    pub fn children(self) -> u32 {
+        self.b >> 4
+    }
+
+    /// Whether an interior node's lower (bit 0) and upper (bit 1) children are empty leaves.
+    #[inline(always)]
+    pub fn empty_children(self) -> u32 {
+        (self.b >> 2) & 3
     }
 
     /// The triangle count of a leaf.
@@ -83,9 +98,14 @@ mod tests {
 
     #[test]
     fn fields_round_trip() {
-        let n = KdNode::interior(2, -3.5, MAX_NODE_FIELD);
+        let n = KdNode::interior(2, -3.5, MAX_CHILD_INDEX, (false, true));
         assert!(!n.is_leaf());
-        assert_eq!((n.axis(), n.split(), n.above()), (2, -3.5, MAX_NODE_FIELD));
+        assert_eq!(
+            (n.axis(), n.split(), n.children(), n.empty_children()),
+            (2, -3.5, MAX_CHILD_INDEX, 2)
+        );
+        let m = KdNode::interior(0, 1.0, 7, (true, false));
+        assert_eq!((m.children(), m.empty_children(), m.axis()), (7, 1, 0));
         let l = KdNode::leaf(MAX_NODE_FIELD, 77);
         assert!(l.is_leaf());
         assert_eq!((l.count(), l.offset()), (MAX_NODE_FIELD, 77));

@@ -21,6 +21,20 @@ const STACK_SIZE: usize = MAX_DEPTH as usize + 4;
 /// Relative rounding slack of a computed `t` (8 ulps).
 const T_SLACK: f32 = 8.0 * f32::EPSILON;
 
+/// Absolute slack of a computed `t`: four of the smallest subnormal steps, for a `t` that underflows
+/// (whose relative error is then not bounded by `T_SLACK`).
+const T_FLOOR: f32 = 5.6e-45;
+
+/// `t` widened by its rounding slack: `(t − w, t + w)`. An infinite `t` stays infinite (the slack is
+/// capped at `f32::MAX`, so `−∞ + w` is not NaN); a NaN stays NaN, which the callers read as "no
+/// constraint".
+#[inline(always)]
+fn widened(t: f32) -> (f32, f32) {
+    let w = t.abs() * T_SLACK + T_FLOOR;
+    let w = if w < f32::MAX { w } else { f32::MAX };
+    (t - w, t + w)
+}
+
 #[derive(Clone, Copy)]
 struct Pending {
     node: u32,
@@ -47,86 +61,88 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         if tree.bounds.is_empty() {
             return best;
         }
+        // Per ray, per axis: the origin, `1/d`, and whether the ray runs downwards (its near child
+        // is the upper one). `1/d` is `±∞` for a zero component, which makes every split `t` on
+        // that axis `±∞` (the ray never crosses the plane: the near child holds the origin when `t`
+        // is `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children:
+        // the ray lies in the plane, which both closed boxes hold). A component whose inverse
+        // overflows, or underflows (so its relative error is unbounded), gets NaN: no constraint on
+        // that axis, every split visits both sides. Arrays of four, indexed `& 3`, need no checks.
         let (o, d) = (r.org, r.dir);
-        let mut inv = [0.0f32; 3];
+        let mut org = [0.0f32; 4];
+        let mut inv = [0.0f32; 4];
+        let mut down = [0u32; 4];
         let (mut t0, mut t1) = (r.tmin, r.tmax);
         let (lo, hi) = (tree.bounds.min, tree.bounds.max);
         for a in 0..3 {
+            org[a] = o[a];
+            down[a] = u32::from(d[a].is_sign_negative());
             if d[a] == 0.0 {
                 // The box is the triangles' exact bounds: a ray outside its slab misses them all.
                 if o[a] < lo[a] || o[a] > hi[a] {
                     return best;
                 }
+                inv[a] = 1.0 / d[a];
                 continue;
             }
-            // `1/d` may be infinite for a denormal component; the intervals then become NaN or
-            // infinite and the min/max below leave them unconstrained: slower, never wrong.
-            inv[a] = 1.0 / d[a];
-            let ta = (lo[a] - o[a]) * inv[a];
-            let tb = (hi[a] - o[a]) * inv[a];
-            let (near, far) = (ta.min(tb), ta.max(tb));
-            t0 = t0.max(near - T_SLACK * near.abs());
-            t1 = t1.min(far + T_SLACK * far.abs());
+            let ia = 1.0 / d[a];
+            if !(ia.is_finite() && ia.abs() >= f32::MIN_POSITIVE) {
+                inv[a] = f32::NAN;
+                continue;
+            }
+            inv[a] = ia;
+            let (ta, tb) = ((lo[a] - o[a]) * ia, (hi[a] - o[a]) * ia);
+            let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
+            let (near, _) = widened(near);
+            let (_, far) = widened(far);
+            t0 = if near > t0 { near } else { t0 };
+            t1 = if far < t1 { far } else { t1 };
         }
         if !(t0 <= t1) {
             return best;
         }
         let nodes = &tree.nodes[..];
-        let mut stack = [Pending {
-            node: 0,
-            t0: 0.0,
-            t1: 0.0,
-        }; STACK_SIZE];
+        // Entries are written before they are read (`sp` counts the written ones), so the array
+        // needs no initialisation.
+        let mut stack = [core::mem::MaybeUninit::<Pending>::uninit(); STACK_SIZE];
         let mut sp = 0usize;
         let mut index = 0u32;
         loop {
-            let Some(&node) = nodes.get(index as usize) else {
-                return best;
-            };
+            debug_assert!((index as usize) < nodes.len());
+            // SAFETY: `index` is 0 (the root; a built tree has at least one node) or a child index
+            // the builder wrote (`children` or `children + 1` of an interior node, both allocated
+            // when it was split), all below `nodes.len()`.
+            let node = unsafe { *nodes.get_unchecked(index as usize) };
             if COUNT {
                 work.nodes += 1;
             }
             if !node.is_leaf() {
                 let a = node.axis() & 3;
-                let a = if a == 3 { 2 } else { a };
-                let s = node.split();
-                let below = index + 1;
-                let above = node.above();
-                let (near, far, near_t1, far_t0);
-                if d[a] == 0.0 {
-                    // The ray never crosses the plane: the side holding the origin, and the other
-                    // one too when the ray lies in the plane (both closed boxes hold it).
-                    let on_below = o[a] < s;
-                    (near, far) = if on_below {
-                        (below, above)
-                    } else {
-                        (above, below)
-                    };
-                    near_t1 = t1;
-                    far_t0 = if o[a] == s { t0 } else { f32::INFINITY };
-                } else {
-                    let ts = (s - o[a]) * inv[a];
-                    let w = T_SLACK * ts.abs();
-                    (near, far) = if d[a] > 0.0 {
-                        (below, above)
-                    } else {
-                        (above, below)
-                    };
-                    // `min`/`max` ignore a NaN operand, which leaves the interval whole.
-                    near_t1 = t1.min(ts + w);
-                    far_t0 = t0.max(ts - w);
-                }
-                let go_near = near_t1 >= t0;
-                let go_far = far_t0 <= t1;
+                // Near and far children (the near one is the upper for a ray running down the axis),
+                // and whether each is an empty leaf (not worth a visit).
+                let flip = down[a];
+                let near = node.children() + flip;
+                let far = node.children() + (flip ^ 1);
+                let empty = node.empty_children();
+                let near_empty = (empty >> flip) & 1 != 0;
+                let far_empty = (empty >> (flip ^ 1)) & 1 != 0;
+                let (ts_lo, ts_hi) = widened((node.split() - org[a]) * inv[a]);
+                // Comparisons, not `min`/`max`: a NaN bound compares false and leaves the interval
+                // whole, which is what an axis without constraint needs.
+                let near_t1 = if ts_hi < t1 { ts_hi } else { t1 };
+                let far_t0 = if ts_lo > t0 { ts_lo } else { t0 };
+                let go_near = !near_empty && near_t1 >= t0;
+                let go_far = !far_empty && far_t0 <= t1;
                 if go_near {
                     if go_far {
                         // The depth bound (≤ MAX_DEPTH < STACK_SIZE) leaves room: one entry per level.
+                        debug_assert!(sp < STACK_SIZE);
                         if let Some(slot) = stack.get_mut(sp) {
-                            *slot = Pending {
+                            slot.write(Pending {
                                 node: far,
                                 t0: far_t0,
                                 t1,
-                            };
+                            });
                             sp += 1;
                         }
                     }
@@ -162,7 +178,8 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                     return best;
                 }
                 sp -= 1;
-                let p = stack[sp];
+                // SAFETY: entries below `sp` were written by the push above.
+                let p = unsafe { stack.get_unchecked(sp).assume_init() };
                 if !(best.t < p.t0) {
                     index = p.node;
                     t0 = p.t0;
