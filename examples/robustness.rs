@@ -129,7 +129,7 @@ fn stats(spec: &str) {
     let (kr, kh) = rays_per_second(&kd, &mesh, &rays);
     assert_eq!(gh, kh);
     println!(
-        "{spec}: tris {} | grid res {:?} build {:.2} ms refs/tri {:.2} bytes {} {:.2} Mrays/s | kd build {:.2} ms refs/tri {:.2} bytes {} nodes {} depth {} {:.2} Mrays/s | hits {gh}/{}",
+        "{spec}: tris {} | grid res {:?} build {:.2} ms refs/tri {:.2} bytes {} {:.2} Mrays/s | kd build {:.2} ms refs/tri {:.2} bytes {} nodes {} depth {} largest leaf {} budget leaves {:?} {:.2} Mrays/s | hits {gh}/{}",
         mesh.len(),
         grid.resolution(),
         gb * 1e3,
@@ -141,6 +141,8 @@ fn stats(spec: &str) {
         kd.memory_bytes() + mesh.memory_bytes(),
         kd.node_count(),
         kd.depth(),
+        kd.largest_leaf(),
+        kd.budget_leaves(),
         kr * 1e-6,
         rays.len()
     );
