@@ -5,8 +5,8 @@
 //!   upper bound: Shevtsov et al. 2007, as Mitsuba's `SAHKDTree3D` does above 65 536); smaller nodes
 //!   by the exact SAH over every event position, sorted per node (Wald & Havran's sweep, with end <
 //!   planar < start at equal positions). Either way, the triangles that straddle the plane are
-//!   clipped to each child box ("perfect splits", [`clipped_bounds`]), so a child holds only
-//!   triangles that really enter it and their parts' bounds.
+//!   clipped at it ("perfect splits", [`split_bounds`]), so a child holds only triangles that really
+//!   enter it and bounds of their parts.
 //! - **Cost**: `C_t + C_i·(P_L·⌈N_L/4⌉ + P_R·⌈N_R/4⌉)` (times `1 − empty_bonus` when a child is
 //!   empty): the list test takes a leaf's triangles four at a time, so one to four cost the same.
 //! - **Termination** (pbrt's rule): a split no better than a leaf is still taken, as a "bad refine",
@@ -26,7 +26,7 @@
 
 use alloc::vec::Vec;
 
-use super::clip::clipped_bounds;
+use super::clip::split_bounds;
 use super::node::{KdNode, MAX_CHILD_INDEX, MAX_NODE_FIELD};
 use super::{KdTreeParams, MAX_DEPTH};
 use crate::budget::MemoryBudget;
@@ -732,8 +732,12 @@ impl Builder<'_> {
                 let Some(tri) = self.mesh.triangle(it.prim) else {
                     continue;
                 };
-                for (child_box, child) in [(left_box, &mut *left), (right_box, &mut *right)] {
-                    let c = clipped_bounds(tri, child_box);
+                let part = Aabb {
+                    min: glam::Vec3::from(it.lo),
+                    max: glam::Vec3::from(it.hi),
+                };
+                let (lower, upper) = split_bounds(tri, &part, axis, pos);
+                for (c, child) in [(lower, &mut *left), (upper, &mut *right)] {
                     if !c.is_empty() {
                         let part = Item {
                             lo: c.min.to_array(),

@@ -1,5 +1,5 @@
-//! The part of a triangle inside a box: Sutherland–Hodgman clipping in f64 against the planes the
-//! triangle's bounds cross, with the bounds rounded outward to f32 ("perfect splits").
+//! The parts of a triangle on either side of a split plane ("perfect splits"), with their bounds
+//! rounded outward to f32; and, for the tests, the part inside a box by Sutherland–Hodgman clipping.
 
 use glam::Vec3;
 
@@ -38,9 +38,11 @@ fn next_toward_neg_inf(f: f32) -> f32 {
     }
 }
 
+#[cfg(test)]
 /// Most vertices a clipped polygon may have (a triangle clipped by six planes has at most nine).
 const CAP: usize = 16;
 
+#[cfg(test)]
 /// A clipped polygon: its vertices in f64, in order.
 type Poly = [[f64; 3]; CAP];
 
@@ -50,7 +52,8 @@ type Poly = [[f64; 3]; CAP];
 /// Guarantees: the result contains every point of `tri` that lies in `b` (when rounding leaves the
 /// clipped polygon empty or odd, it falls back to the triangle's bounds clamped to `b`, which is
 /// larger and still right).
-pub(super) fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
+#[cfg(test)]
+fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
     let tb = Aabb::of_triangle(tri);
     let fallback = || {
         let c = Aabb {
@@ -101,6 +104,7 @@ pub(super) fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
     }
 }
 
+#[cfg(test)]
 /// Clips the polygon `buf[from]` (`n` vertices) against the planes of axis `A` its bounds `t`
 /// cross (of the box's `(min, max)` on that axis), alternating buffers. `None` when the polygon
 /// vanishes or overflows (the caller falls back to the clamped triangle bounds).
@@ -131,6 +135,7 @@ fn clip_axis<const A: usize>(
     Some((from, n))
 }
 
+#[cfg(test)]
 /// Clips the polygon `src` against the plane `x[A] = bound`, keeping the side above it or below,
 /// into `dst`; returns the vertex count, or `None` when `dst` overflows.
 #[inline]
@@ -169,6 +174,73 @@ fn clip_plane<const A: usize>(
     Some(m)
 }
 
+/// The bounds of the parts of `tri` on either side of the plane `x[axis] = pos`, each intersected
+/// with `part` (the bounds of the triangle's part in the node being split) and with its side: the
+/// vertices on each side and the points where the edges cross the plane (in f64, rounded outward to
+/// f32). One plane instead of the child box's six: the result contains the exact part of the
+/// triangle in each child (a subset of both the part in the node and the part on that side of the
+/// plane), and is at most the box [`clipped_bounds`] gives plus what the node's box already cut.
+/// A side the triangle does not reach is [`Aabb::EMPTY`].
+pub(super) fn split_bounds(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
+    let p = tri.map(|v| [f64::from(v.x), f64::from(v.y), f64::from(v.z)]);
+    let plane = f64::from(pos);
+    let (mut lo, mut hi) = (
+        [[f64::INFINITY; 3], [f64::INFINITY; 3]],
+        [[f64::NEG_INFINITY; 3], [f64::NEG_INFINITY; 3]],
+    );
+    let mut add = |side: usize, q: &[f64; 3]| {
+        for k in 0..3 {
+            lo[side][k] = lo[side][k].min(q[k]);
+            hi[side][k] = hi[side][k].max(q[k]);
+        }
+    };
+    for i in 0..3 {
+        let (a, b) = (&p[i], &p[(i + 1) % 3]);
+        if a[axis] <= plane {
+            add(0, a);
+        }
+        if a[axis] >= plane {
+            add(1, a);
+        }
+        if (a[axis] < plane) != (b[axis] < plane) && a[axis] != plane && b[axis] != plane {
+            let t = (plane - a[axis]) / (b[axis] - a[axis]);
+            let mut x = [0.0; 3];
+            for k in 0..3 {
+                x[k] = a[k] + (b[k] - a[k]) * t;
+            }
+            x[axis] = plane;
+            add(0, &x);
+            add(1, &x);
+        }
+    }
+    let side = |s: usize| {
+        if !(lo[s][0] <= hi[s][0]) {
+            return Aabb::EMPTY;
+        }
+        let mut b = Aabb {
+            min: Vec3::new(
+                round_down(lo[s][0]),
+                round_down(lo[s][1]),
+                round_down(lo[s][2]),
+            )
+            .max(part.min),
+            max: Vec3::new(round_up(hi[s][0]), round_up(hi[s][1]), round_up(hi[s][2]))
+                .min(part.max),
+        };
+        if s == 0 {
+            b.max[axis] = b.max[axis].min(pos);
+        } else {
+            b.min[axis] = b.min[axis].max(pos);
+        }
+        if b.is_empty() {
+            Aabb::EMPTY
+        } else {
+            b
+        }
+    };
+    (side(0), side(1))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -193,6 +265,65 @@ mod tests {
             max: Vec3::splat(11.0),
         };
         assert!(clipped_bounds(&tri, &far).is_empty());
+    }
+
+    /// The split's sides contain every point of the triangle inside the node's part on their side
+    /// (sampled), lie inside that part and their half-space, and are within the box clipping
+    /// gives for the child box.
+    #[test]
+    fn split_sides_hold_the_triangle_parts() {
+        let mut rng = crate::workload::SplitMix64::new(4);
+        for _ in 0..5_000 {
+            let tri =
+                [rng.next_vec3(), rng.next_vec3(), rng.next_vec3()].map(|v| v * 2.0 - Vec3::ONE);
+            let node = Aabb {
+                min: rng.next_vec3() * 0.8 - Vec3::ONE,
+                max: rng.next_vec3() * 0.8 + Vec3::splat(0.2),
+            };
+            let part = clipped_bounds(&tri, &node);
+            if part.is_empty() {
+                continue;
+            }
+            let axis = rng.below(3);
+            let pos = node.min[axis] + (node.max[axis] - node.min[axis]) * rng.next_f32();
+            let (lower, upper) = split_bounds(&tri, &part, axis, pos);
+            let (mut lbox, mut ubox) = (node, node);
+            lbox.max[axis] = pos;
+            ubox.min[axis] = pos;
+            for _ in 0..64 {
+                let (u, v) = (rng.next_f32(), rng.next_f32());
+                let (u, v) = if u + v > 1.0 {
+                    (1.0 - u, 1.0 - v)
+                } else {
+                    (u, v)
+                };
+                let q = tri[0] + u * (tri[1] - tri[0]) + v * (tri[2] - tri[0]);
+                let inside = |b: &Aabb| q.cmpge(b.min).all() && q.cmple(b.max).all();
+                // A point strictly inside (rounding of q aside) a child must be in that side's box.
+                let shrunk = |b: &Aabb| Aabb {
+                    min: b.min + Vec3::splat(1e-5),
+                    max: b.max - Vec3::splat(1e-5),
+                };
+                if inside(&shrunk(&lbox)) {
+                    assert!(
+                        inside(&lower),
+                        "{q:?} of {tri:?} missing below {pos} on {axis}: {lower:?}"
+                    );
+                }
+                if inside(&shrunk(&ubox)) {
+                    assert!(
+                        inside(&upper),
+                        "{q:?} of {tri:?} missing above {pos} on {axis}: {upper:?}"
+                    );
+                }
+            }
+            for (b, child) in [(lower, lbox), (upper, ubox)] {
+                if !b.is_empty() {
+                    assert!(b.min.cmpge(part.min).all() && b.max.cmple(part.max).all());
+                    assert!(b.min.cmpge(child.min).all() && b.max.cmple(child.max).all());
+                }
+            }
+        }
     }
 
     #[test]
