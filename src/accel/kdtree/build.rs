@@ -433,7 +433,7 @@ impl Builder<'_> {
             self.budget
                 .push(&mut self.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         }
-        let (nl, nr) = self.partition(depth, side, &split, &left_box, &right_box)?;
+        let (nl, nr) = self.partition(depth, side, &split)?;
         let total = (nl + nr).max(1);
         let share_l = ((refs_allowed as u128 * nl as u128) / total as u128) as usize;
         let share_r = refs_allowed.saturating_sub(share_l);
@@ -699,15 +699,12 @@ impl Builder<'_> {
     }
 
     /// Writes the children's items of the node `levels[depth][side]` into `levels[depth + 1]`
-    /// (lower, upper). Straddlers are clipped to each child box; a part that turns out empty is
-    /// dropped. Returns the children's counts `(lower, upper)`.
+    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped. Returns the children's counts `(lower, upper)`.
     fn partition(
         &mut self,
         depth: u32,
         side: usize,
         split: &Split,
-        left_box: &Aabb,
-        right_box: &Aabb,
     ) -> Result<(usize, usize), BuildError> {
         let (axis, pos) = (split.axis, split.pos);
         let d = depth as usize;
