@@ -43,6 +43,13 @@ pub enum MeshError {
 pub enum BuildError {
     /// The mesh was refused.
     InvalidMesh(MeshError),
+    /// One geometry of a scene of several was refused.
+    InvalidGeometry {
+        /// Which geometry (its index in the caller's list).
+        geometry: usize,
+        /// Why.
+        error: MeshError,
+    },
     /// The allocator refused memory.
     OutOfMemory {
         /// What was being allocated.
@@ -149,6 +156,9 @@ impl fmt::Display for BuildError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match *self {
             BuildError::InvalidMesh(e) => write!(f, "invalid mesh: {e}"),
+            BuildError::InvalidGeometry { geometry, error } => {
+                write!(f, "invalid geometry {geometry}: {error}")
+            }
             BuildError::OutOfMemory { what, bytes } => {
                 write!(f, "out of memory allocating {bytes} bytes for {what}")
             }

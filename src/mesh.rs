@@ -8,13 +8,17 @@ use crate::error::{BuildError, MeshError};
 use crate::ray::Aabb;
 
 /// A triangle mesh that passed validation, stored as three vertices per triangle so that a query reads
-/// one contiguous record per triangle test.
+/// one contiguous record per triangle test. It may hold several geometries (each a mesh of the
+/// caller's), their triangles one after the other in the order given.
 ///
 /// # Guarantees
 /// - every coordinate is finite;
 /// - there are fewer than `u32::MAX` triangles, so every primitive id fits a `u32` and
 ///   `Hit::INVALID_ID` is never a real id;
-/// - triangle `i` is the `i`-th triangle of the input, in the input's vertex order.
+/// - triangle `i` of geometry `g` is triangle `geometry_start(g) + i`, its vertices those of the
+///   input, in the input's vertex order;
+/// - the vertex indices of every triangle are kept (within their geometry), so that
+///   [`TriMesh::set_vertices`] can move a geometry's vertices.
 ///
 /// Functions that receive a `TriMesh` do not check these again.
 #[derive(Debug)]
@@ -25,6 +29,12 @@ pub struct TriMesh {
     degenerate_bits: Vec<u32>,
     bounds: Aabb,
     degenerate: usize,
+    /// Each triangle's vertex indices, within its geometry.
+    indices: Vec<[u32; 3]>,
+    /// Per geometry, its first triangle; then the triangle count (`geometries + 1` entries).
+    starts: Vec<u32>,
+    /// Per geometry, its vertex count.
+    vertex_counts: Vec<usize>,
 }
 
 /// Where a mesh's data comes from: counts plus two accessors, so that C's strided arrays and Rust
@@ -74,67 +84,155 @@ impl TriMesh {
         src: &impl MeshSource,
         budget: &mut MemoryBudget,
     ) -> Result<TriMesh, BuildError> {
-        let n = src.triangle_count();
-        let nv = src.vertex_count();
-        if n >= u32::MAX as usize {
-            return Err(MeshError::CountOverflow {
-                what: "triangle count",
+        TriMesh::from_sources(&[src], budget).map_err(|e| match e {
+            BuildError::InvalidGeometry { error, .. } => BuildError::InvalidMesh(error),
+            other => other,
+        })
+    }
+
+    /// Validates the geometries `sources` and copies their triangles one after the other, charging
+    /// the copy to `budget`; a refusal says which geometry ([`BuildError::InvalidGeometry`]).
+    pub fn from_sources(
+        sources: &[&dyn MeshSource],
+        budget: &mut MemoryBudget,
+    ) -> Result<TriMesh, BuildError> {
+        let mut n = 0usize;
+        for (g, src) in sources.iter().enumerate() {
+            n = n.checked_add(src.triangle_count()).unwrap_or(usize::MAX);
+            let bad = |error| BuildError::InvalidGeometry {
+                geometry: g,
+                error,
+            };
+            if n >= u32::MAX as usize || n.checked_mul(core::mem::size_of::<[Vec3; 3]>()).is_none()
+            {
+                return Err(bad(MeshError::CountOverflow {
+                    what: "triangle count",
+                }));
             }
-            .into());
+            for vi in 0..src.vertex_count() {
+                if !Vec3::from(src.vertex(vi)).is_finite() {
+                    return Err(bad(MeshError::NonFiniteVertex { vertex: vi }));
+                }
+            }
+            for i in 0..src.triangle_count() {
+                let nv = src.vertex_count();
+                if let Some(&vi) = src.triangle(i).iter().find(|&&vi| vi as usize >= nv) {
+                    return Err(bad(MeshError::IndexOutOfRange {
+                        triangle: i,
+                        index: vi,
+                        vertex_count: nv,
+                    }));
+                }
+            }
         }
-        if n.checked_mul(core::mem::size_of::<[Vec3; 3]>()).is_none() {
-            return Err(MeshError::CountOverflow {
-                what: "triangle count",
-            }
-            .into());
-        }
-        for vi in 0..nv {
-            if !Vec3::from(src.vertex(vi)).is_finite() {
-                return Err(MeshError::NonFiniteVertex { vertex: vi }.into());
-            }
-        }
-        let mut tris = budget.vec::<[Vec3; 3]>(n, "mesh triangles")?;
-        let mut degenerate_bits = match budget.filled(n.div_ceil(32), 0u32, "mesh degenerate flags")
-        {
-            Ok(b) => b,
-            Err(e) => {
-                budget.free(tris);
-                return Err(e);
-            }
+        let mut mesh = TriMesh {
+            tris: budget.vec(n, "mesh triangles")?,
+            degenerate_bits: Vec::new(),
+            bounds: Aabb::EMPTY,
+            degenerate: 0,
+            indices: Vec::new(),
+            starts: Vec::new(),
+            vertex_counts: Vec::new(),
         };
-        let mut lo = Vec3::splat(f32::INFINITY);
-        let mut hi = Vec3::splat(f32::NEG_INFINITY);
-        let mut degenerate = 0;
-        for i in 0..n {
-            let idx = src.triangle(i);
-            if let Some(&vi) = idx.iter().find(|&&vi| vi as usize >= nv) {
-                budget.free(tris);
-                budget.free(degenerate_bits);
-                return Err(MeshError::IndexOutOfRange {
-                    triangle: i,
-                    index: vi,
-                    vertex_count: nv,
-                }
-                .into());
+        let filled = (|| {
+            mesh.degenerate_bits = budget.filled(n.div_ceil(32), 0u32, "mesh degenerate flags")?;
+            mesh.indices = budget.vec(n, "mesh indices")?;
+            mesh.starts = budget.vec(sources.len() + 1, "mesh geometries")?;
+            mesh.vertex_counts = budget.vec(sources.len(), "mesh geometries")?;
+            Ok::<(), BuildError>(())
+        })();
+        if let Err(e) = filled {
+            mesh.release(budget);
+            return Err(e);
+        }
+        for src in sources {
+            mesh.starts.push(mesh.tris.len() as u32);
+            mesh.vertex_counts.push(src.vertex_count());
+            for i in 0..src.triangle_count() {
+                let idx = src.triangle(i);
+                mesh.indices.push(idx);
+                mesh.tris
+                    .push(idx.map(|vi| Vec3::from(src.vertex(vi as usize))));
             }
-            let tri = idx.map(|vi| Vec3::from(src.vertex(vi as usize)));
-            if is_degenerate(&tri) {
+        }
+        mesh.starts.push(mesh.tris.len() as u32);
+        mesh.classify(0..n);
+        Ok(mesh)
+    }
+
+    /// Recomputes the degenerate flags of triangles `range`, then the count and the bounds.
+    fn classify(&mut self, range: core::ops::Range<usize>) {
+        for i in range {
+            let word = &mut self.degenerate_bits[i / 32];
+            if is_degenerate(&self.tris[i]) {
+                *word |= 1 << (i % 32);
+            } else {
+                *word &= !(1 << (i % 32));
+            }
+        }
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        let mut degenerate = 0;
+        for (i, tri) in self.tris.iter().enumerate() {
+            if self.degenerate_bits[i / 32] & (1 << (i % 32)) != 0 {
                 degenerate += 1;
-                if let Some(w) = degenerate_bits.get_mut(i / 32) {
-                    *w |= 1 << (i % 32);
-                }
             } else {
                 lo = lo.min(tri[0]).min(tri[1]).min(tri[2]);
                 hi = hi.max(tri[0]).max(tri[1]).max(tri[2]);
             }
-            tris.push(tri);
         }
-        Ok(TriMesh {
-            tris,
-            degenerate_bits,
-            bounds: Aabb { min: lo, max: hi },
-            degenerate,
-        })
+        self.degenerate = degenerate;
+        self.bounds = Aabb { min: lo, max: hi };
+    }
+
+    /// Number of geometries.
+    pub fn geometry_count(&self) -> usize {
+        self.vertex_counts.len()
+    }
+
+    /// The first triangle of geometry `g` (and, for `g = geometry_count()`, the triangle count).
+    pub fn geometry_start(&self, g: usize) -> u32 {
+        self.starts.get(g).copied().unwrap_or(self.tris.len() as u32)
+    }
+
+    /// The geometry of triangle `prim` and the triangle's index within it (`None` for no such
+    /// triangle).
+    #[inline]
+    pub fn geometry_of(&self, prim: u32) -> Option<(u32, u32)> {
+        if prim as usize >= self.tris.len() {
+            return None;
+        }
+        // The last start not above `prim` (geometries without triangles share a start).
+        let g = self.starts.partition_point(|&s| s <= prim).saturating_sub(1);
+        Some((g as u32, prim - self.starts[g]))
+    }
+
+    /// New positions for the vertices of geometry `g` (`vertex(i)` for each of its
+    /// `vertex_count`): same count and topology. Refuses a non-finite coordinate (nothing changes
+    /// then); afterwards the triangles, degenerate flags and bounds are those of the moved mesh.
+    pub fn set_vertices(
+        &mut self,
+        g: usize,
+        vertex: &dyn Fn(usize) -> [f32; 3],
+    ) -> Result<(), BuildError> {
+        let Some(&count) = self.vertex_counts.get(g) else {
+            return Err(BuildError::InvalidArgument {
+                what: "no such geometry",
+            });
+        };
+        for vi in 0..count {
+            if !Vec3::from(vertex(vi)).is_finite() {
+                return Err(BuildError::InvalidGeometry {
+                    geometry: g,
+                    error: MeshError::NonFiniteVertex { vertex: vi },
+                });
+            }
+        }
+        let range = self.geometry_start(g) as usize..self.geometry_start(g + 1) as usize;
+        for i in range.clone() {
+            self.tris[i] = self.indices[i].map(|vi| Vec3::from(vertex(vi as usize)));
+        }
+        self.classify(range);
+        Ok(())
     }
 
     /// Validates and copies an indexed mesh given as Rust slices.
@@ -207,13 +305,20 @@ impl TriMesh {
 
     /// Bytes this mesh holds.
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.tris) + bytes_of(&self.degenerate_bits)
+        bytes_of(&self.tris)
+            + bytes_of(&self.degenerate_bits)
+            + bytes_of(&self.indices)
+            + bytes_of(&self.starts)
+            + bytes_of(&self.vertex_counts)
     }
 
     /// Gives the copy's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.tris);
         budget.free(self.degenerate_bits);
+        budget.free(self.indices);
+        budget.free(self.starts);
+        budget.free(self.vertex_counts);
     }
 }
 

@@ -112,6 +112,7 @@ impl From<BuildError> for rq_status {
     fn from(e: BuildError) -> Self {
         match e {
             BuildError::InvalidMesh(m) => m.into(),
+            BuildError::InvalidGeometry { error, .. } => error.into(),
             BuildError::OutOfMemory { .. } | BuildError::CapacityExceeded { .. } => {
                 rq_status::RQ_STATUS_OUT_OF_MEMORY
             }
