@@ -26,6 +26,7 @@ extern crate std;
 pub mod accel;
 pub mod budget;
 pub mod error;
+pub mod geometry;
 mod math;
 pub mod mesh;
 pub mod procedural;

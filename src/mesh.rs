@@ -98,11 +98,8 @@ impl TriMesh {
     ) -> Result<TriMesh, BuildError> {
         let mut n = 0usize;
         for (g, src) in sources.iter().enumerate() {
-            n = n.checked_add(src.triangle_count()).unwrap_or(usize::MAX);
-            let bad = |error| BuildError::InvalidGeometry {
-                geometry: g,
-                error,
-            };
+            n = n.saturating_add(src.triangle_count());
+            let bad = |error| BuildError::InvalidGeometry { geometry: g, error };
             if n >= u32::MAX as usize || n.checked_mul(core::mem::size_of::<[Vec3; 3]>()).is_none()
             {
                 return Err(bad(MeshError::CountOverflow {
@@ -191,7 +188,10 @@ impl TriMesh {
 
     /// The first triangle of geometry `g` (and, for `g = geometry_count()`, the triangle count).
     pub fn geometry_start(&self, g: usize) -> u32 {
-        self.starts.get(g).copied().unwrap_or(self.tris.len() as u32)
+        self.starts
+            .get(g)
+            .copied()
+            .unwrap_or(self.tris.len() as u32)
     }
 
     /// The geometry of triangle `prim` and the triangle's index within it (`None` for no such
@@ -202,7 +202,10 @@ impl TriMesh {
             return None;
         }
         // The last start not above `prim` (geometries without triangles share a start).
-        let g = self.starts.partition_point(|&s| s <= prim).saturating_sub(1);
+        let g = self
+            .starts
+            .partition_point(|&s| s <= prim)
+            .saturating_sub(1);
         Some((g as u32, prim - self.starts[g]))
     }
 
@@ -233,6 +236,15 @@ impl TriMesh {
         }
         self.classify(range);
         Ok(())
+    }
+
+    /// Puts back the triangles of geometry `g` as `saved` held them (its triangles before a
+    /// [`TriMesh::set_vertices`]), with their flags and the bounds.
+    pub(crate) fn restore_triangles(&mut self, g: usize, saved: &[[Vec3; 3]]) {
+        let start = self.geometry_start(g) as usize;
+        let end = (start + saved.len()).min(self.tris.len());
+        self.tris[start..end].copy_from_slice(&saved[..end - start]);
+        self.classify(start..end);
     }
 
     /// Validates and copies an indexed mesh given as Rust slices.

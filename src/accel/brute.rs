@@ -1,9 +1,9 @@
 //! The reference structure: every triangle, in id order, through the shared test.
 
-use crate::accel::{run_query, Aabb, RayQuery};
+use crate::accel::{run_query, Aabb, AcceptingQuery, RayQuery};
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
-use crate::triangle::{TriangleLoop, TriangleTest};
+use crate::triangle::{Accept, TriangleLoop, TriangleTest};
 
 /// Tests every non-degenerate triangle. Slow and obviously right: the other structures are checked
 /// against it bit for bit.
@@ -50,12 +50,16 @@ pub(crate) fn test_all<T: TriangleTest, const ANY: bool>(test: &T, mesh: &TriMes
             if flags & (1 << k) != 0 {
                 continue;
             }
-            if let Some((t, u, v)) = test.test(tri) {
+            let prim = (base + k) as u32;
+            if let Some(hit) = test.test(tri) {
+                if !test.accept(prim, &hit) {
+                    continue;
+                }
                 let h = Hit {
-                    t,
-                    u,
-                    v,
-                    prim: (base + k) as u32,
+                    t: hit.t,
+                    u: hit.u,
+                    v: hit.v,
+                    prim,
                 };
                 if h.beats(&best) {
                     best = h;
@@ -75,10 +79,20 @@ impl RayQuery for BruteForce {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        run_query(mesh, ray, AllTriangles::<false> { mesh })
+        self.intersect_accepting(mesh, ray, None)
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
-        run_query(mesh, ray, AllTriangles::<true> { mesh }).is_hit()
+        self.occluded_accepting(mesh, ray, None)
+    }
+}
+
+impl AcceptingQuery for BruteForce {
+    fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
+        run_query(mesh, ray, accept, AllTriangles::<false> { mesh })
+    }
+
+    fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
+        run_query(mesh, ray, accept, AllTriangles::<true> { mesh }).is_hit()
     }
 }

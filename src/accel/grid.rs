@@ -5,13 +5,14 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 use crate::accel::brute::test_all;
-use crate::accel::{run_query, test_refs, Aabb, Mailbox, RayQuery, Refs};
+use crate::accel::{run_query, test_refs, Aabb, AcceptingQuery, Mailbox, RayQuery, Refs};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::math;
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
+use crate::triangle::Accept;
 use crate::triangle::{TriangleLoop, TriangleTest};
 
 /// Unit roundoff of f32 (2^-24), the unit of the walk's rounding errors.
@@ -342,6 +343,7 @@ impl UniformGrid {
         run_query(
             mesh,
             ray,
+            None,
             Walk::<true, false> {
                 grid: self,
                 mesh,
@@ -393,30 +395,36 @@ impl RayQuery for UniformGrid {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let work = &mut GridWork::default();
-        run_query(
-            mesh,
-            ray,
-            Walk::<false, false> {
-                grid: self,
-                mesh,
-                work,
-            },
-        )
+        self.intersect_accepting(mesh, ray, None)
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
+        self.occluded_accepting(mesh, ray, None)
+    }
+}
+
+impl AcceptingQuery for UniformGrid {
+    // Out of line, so plain queries share this one copy of the walks.
+    #[inline(never)]
+    fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
         let work = &mut GridWork::default();
-        run_query(
+        let walk = Walk::<false, false> {
+            grid: self,
             mesh,
-            ray,
-            Walk::<false, true> {
-                grid: self,
-                mesh,
-                work,
-            },
-        )
-        .is_hit()
+            work,
+        };
+        run_query(mesh, ray, accept, walk)
+    }
+
+    #[inline(never)]
+    fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
+        let work = &mut GridWork::default();
+        let walk = Walk::<false, true> {
+            grid: self,
+            mesh,
+            work,
+        };
+        run_query(mesh, ray, accept, walk).is_hit()
     }
 }
 

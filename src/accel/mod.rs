@@ -4,7 +4,7 @@ use crate::mesh::TriMesh;
 pub use crate::ray::Aabb;
 use crate::ray::{Hit, Ray};
 use crate::triangle::packs::TrianglePacks;
-use crate::triangle::{Block4, PreparedRay, TriangleLoop, TriangleTest};
+use crate::triangle::{Accept, Block4, PreparedRay, TriangleLoop, TriangleTest};
 
 pub mod brute;
 pub mod grid;
@@ -25,13 +25,32 @@ pub trait RayQuery {
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool;
 }
 
+/// The queries of [`RayQuery`] with conditions on hits (masks, culling, filters: see
+/// [`crate::geometry`]): a hit counts only when `accept` says so (`None`: every hit counts, the
+/// plain query), and the closest such hit is the answer. Conditions are asked once per exact hit,
+/// not per triangle test.
+pub(crate) trait AcceptingQuery {
+    /// The closest hit `accept` counts, ties to the lowest primitive id, or [`Hit::MISS`].
+    fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit;
+    /// True when any hit `accept` counts is in `[tmin, tmax]`.
+    fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool;
+}
+
 /// Prepares `ray` for the triangles of `mesh` and runs `walk` with the triangle test specialised for
-/// the ray's axes: the one entry of every structure's queries. A ray that can hit nothing (see
-/// [`PreparedRay::new`]) is a miss without a walk.
+/// the ray's axes (and the query's conditions on hits, `accept`): the one entry of every
+/// structure's queries. A ray that can hit nothing (see [`PreparedRay::new`]) is a miss without a
+/// walk.
 #[inline(always)]
-pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(mesh: &TriMesh, ray: &Ray, walk: L) -> Hit {
+pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
+    mesh: &TriMesh,
+    ray: &Ray,
+    accept: Option<&dyn Accept>,
+    walk: L,
+) -> Hit {
     match PreparedRay::new(ray) {
-        Some(r) => r.for_scene(mesh.coordinate_bound()).dispatch(walk),
+        Some(r) => r
+            .for_scene(mesh.coordinate_bound())
+            .dispatch_accepting(accept, walk),
         None => Hit::MISS,
     }
 }
@@ -129,8 +148,16 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
             if MAILBOX && mailbox.seen(prim) {
                 continue;
             }
-            if let Some((t, u, v)) = test.test(&block.get(lane)) {
-                let h = Hit { t, u, v, prim };
+            if let Some(hit) = test.test(&block.get(lane)) {
+                if !test.accept(prim, &hit) {
+                    continue;
+                }
+                let h = Hit {
+                    t: hit.t,
+                    u: hit.u,
+                    v: hit.v,
+                    prim,
+                };
                 if ANY {
                     return Some(h);
                 }
@@ -205,6 +232,7 @@ mod tests {
         let closest = run_query(
             mesh,
             ray,
+            None,
             List::<false> {
                 mesh,
                 packs,
@@ -215,6 +243,7 @@ mod tests {
         let any = run_query(
             mesh,
             ray,
+            None,
             List::<true> {
                 mesh,
                 packs,
@@ -235,7 +264,7 @@ mod tests {
                 test_all::<T, false>(&test, self.0)
             }
         }
-        run_query(mesh, ray, All(mesh))
+        run_query(mesh, ray, None, All(mesh))
     }
 
     /// The four-wide list test, packed (block-aligned lists) and indexed (gathered, unaligned

@@ -77,21 +77,45 @@ pub(crate) trait TriangleLoop {
     fn run<T: TriangleTest>(self, test: T) -> Self::Output;
 }
 
+/// An exact hit of one triangle: `t`, the barycentrics of the second and third vertex, and whether
+/// the ray meets the triangle's front face (the side from which its vertices appear
+/// counter-clockwise: `d·((v1 − v0) × (v2 − v0)) < 0`, decided exactly).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct TriHit {
+    pub t: f32,
+    pub u: f32,
+    pub v: f32,
+    pub front: bool,
+}
+
+/// What a query asks of a hit beyond being one: masks, culling, filters. Asked for every exact hit
+/// before it competes for the closest (so once per candidate, not per triangle test).
+pub(crate) trait Accept {
+    /// True when the hit of triangle `prim` counts.
+    fn accept(&self, prim: u32, hit: &TriHit) -> bool;
+}
+
 /// The shared triangle test for one prepared ray.
 pub(crate) trait TriangleTest: Copy {
     /// The ray.
     fn ray(&self) -> &PreparedRay;
-    /// Exactly [`PreparedRay::intersect_triangle`] on `tri` (finite coordinates).
-    fn test(&self, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)>;
+    /// Exactly [`PreparedRay::intersect_triangle`] on `tri` (finite coordinates), with the facing.
+    fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit>;
+    /// Whether the query counts this hit of triangle `prim` (always, for a plain query).
+    fn accept(&self, prim: u32, hit: &TriHit) -> bool;
     /// The lanes of `block` that [`TriangleTest::test`] might hit (bit `k` for lane `k`): every lane
     /// it would hit is set; most lanes it would miss are clear.
     fn survivors(&self, block: &Block4) -> u32;
 }
 
 /// The test specialised for `kz` (the dominant axis of the direction) and `swap` (whether `kx` and
-/// `ky` trade places because `dir[kz] < 0`).
+/// `ky` trade places because `dir[kz] < 0`), with the query's conditions on hits (none for a plain
+/// query).
 #[derive(Clone, Copy)]
-pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(&'a PreparedRay);
+pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(
+    &'a PreparedRay,
+    Option<&'a dyn Accept>,
+);
 
 impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
     #[inline(always)]
@@ -102,8 +126,13 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
     // Out of line: it runs only for the filter's survivors (about one per ray), and one copy per
     // kernel instead of one per walk keeps the library small.
     #[inline(never)]
-    fn test(&self, tri: &[Vec3; 3]) -> Option<(f32, f32, f32)> {
+    fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
         self.0.test_axes::<KZ, SWAP>(tri)
+    }
+
+    #[inline(always)]
+    fn accept(&self, prim: u32, hit: &TriHit) -> bool {
+        self.1.map_or(true, |a| a.accept(prim, hit))
     }
 
     #[inline(always)]
@@ -120,7 +149,7 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
 struct Single<'a>(&'a [Vec3; 3]);
 
 impl TriangleLoop for Single<'_> {
-    type Output = Option<(f32, f32, f32)>;
+    type Output = Option<TriHit>;
     #[inline(always)]
     fn run<T: TriangleTest>(self, test: T) -> Self::Output {
         test.test(self.0)
@@ -202,13 +231,23 @@ impl PreparedRay {
     /// Runs `lp` with the triangle test specialised for this ray's axes.
     #[inline(always)]
     pub(crate) fn dispatch<L: TriangleLoop>(&self, lp: L) -> L::Output {
+        self.dispatch_accepting(None, lp)
+    }
+
+    /// [`PreparedRay::dispatch`] for a query whose hits must also pass `accept`.
+    #[inline(always)]
+    pub(crate) fn dispatch_accepting<L: TriangleLoop>(
+        &self,
+        accept: Option<&dyn Accept>,
+        lp: L,
+    ) -> L::Output {
         match self.axes {
-            0 => lp.run(Kernel::<0, false>(self)),
-            1 => lp.run(Kernel::<0, true>(self)),
-            2 => lp.run(Kernel::<1, false>(self)),
-            3 => lp.run(Kernel::<1, true>(self)),
-            4 => lp.run(Kernel::<2, false>(self)),
-            _ => lp.run(Kernel::<2, true>(self)),
+            0 => lp.run(Kernel::<0, false>(self, accept)),
+            1 => lp.run(Kernel::<0, true>(self, accept)),
+            2 => lp.run(Kernel::<1, false>(self, accept)),
+            3 => lp.run(Kernel::<1, true>(self, accept)),
+            4 => lp.run(Kernel::<2, false>(self, accept)),
+            _ => lp.run(Kernel::<2, true>(self, accept)),
         }
     }
 
@@ -223,6 +262,7 @@ impl PreparedRay {
             return None;
         }
         self.dispatch(Single(&[p0, p1, p2]))
+            .map(|h| (h.t, h.u, h.v))
     }
 
     /// The test with the axes fixed at compile time.
@@ -236,10 +276,7 @@ impl PreparedRay {
     /// vertices, every sheared coordinate is within `e = u·(2S + 4Z)` of its exact value and every
     /// edge function within `S·(4u·S + 4e) + 2e²` (`u = 2^-53`, each factor rounded up).
     #[inline(always)]
-    fn test_axes<const KZ: usize, const SWAP: bool>(
-        &self,
-        tri: &[Vec3; 3],
-    ) -> Option<(f32, f32, f32)> {
+    fn test_axes<const KZ: usize, const SWAP: bool>(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
         let kx = if SWAP { (KZ + 2) % 3 } else { (KZ + 1) % 3 };
         let ky = if SWAP { (KZ + 1) % 3 } else { (KZ + 2) % 3 };
         let o = &self.org64;
@@ -272,9 +309,13 @@ impl PreparedRay {
         if !decided {
             return self.decide_exactly(tri, [u, v, w], bound, z, zmax);
         }
-        match self.finish([u, v, w], bound, z, zmax) {
+        // One sign, and `U + V + W > 0` exactly when the ray meets the front face.
+        let front = u > 0.0;
+        match self.finish([u, v, w], bound, z, zmax, front) {
             Ok(hit) => hit,
-            Err(Undecided) => self.finish_exactly(&ExactTriangle::new(self.org, self.dir, tri)),
+            Err(Undecided) => {
+                self.finish_exactly(&ExactTriangle::new(self.org, self.dir, tri), front)
+            }
         }
     }
 
@@ -292,7 +333,8 @@ impl PreparedRay {
         err: f64,
         z: [f64; 3],
         zmax: f64,
-    ) -> Result<Option<(f32, f32, f32)>, Undecided> {
+        front: bool,
+    ) -> Result<Option<TriHit>, Undecided> {
         let [u, v, w] = edges;
         let det = u + v + w;
         let inv = 1.0 / det;
@@ -319,7 +361,12 @@ impl PreparedRay {
         if !(t >= self.tmin && t <= self.tmax && t.is_finite()) {
             return Ok(None);
         }
-        Ok(Some((t, (v * inv) as f32, (w * inv) as f32)))
+        Ok(Some(TriHit {
+            t,
+            u: (v * inv) as f32,
+            v: (w * inv) as f32,
+            front,
+        }))
     }
 
     /// The edges the f64 bound left open, decided in exact integers; then `t` as in
@@ -333,7 +380,7 @@ impl PreparedRay {
         bound: f64,
         z: [f64; 3],
         zmax: f64,
-    ) -> Option<(f32, f32, f32)> {
+    ) -> Option<TriHit> {
         #[cfg(test)]
         COLD_EDGES.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
         let exact = ExactTriangle::new(self.org, self.dir, tri);
@@ -356,16 +403,16 @@ impl PreparedRay {
             // Mixed signs: the line passes outside. All zero: the triangle is seen edge-on.
             return None;
         }
-        match self.finish(edges, 2.0 * bound, z, zmax) {
+        match self.finish(edges, 2.0 * bound, z, zmax, pos) {
             Ok(hit) => hit,
-            Err(Undecided) => self.finish_exactly(&exact),
+            Err(Undecided) => self.finish_exactly(&exact, pos),
         }
     }
 
     /// `t` rounded exactly, then the window, for a line known to meet the triangle.
     #[cold]
     #[inline(never)]
-    fn finish_exactly(&self, exact: &ExactTriangle) -> Option<(f32, f32, f32)> {
+    fn finish_exactly(&self, exact: &ExactTriangle, front: bool) -> Option<TriHit> {
         #[cfg(test)]
         COLD_T.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
         let t = exact.rounded_t()?;
@@ -373,7 +420,7 @@ impl PreparedRay {
             return None;
         }
         let (u, v) = exact.barycentrics();
-        Some((t, u, v))
+        Some(TriHit { t, u, v, front })
     }
 }
 

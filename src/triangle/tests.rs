@@ -245,14 +245,14 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             continue;
         };
         let r = r.for_scene(1.0);
-        let kernel = super::Kernel::<2, false>(&r);
+        let kernel = super::Kernel::<2, false>(&r, None);
         let survivors = match r.axes {
-            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>(&r), &block),
-            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>(&r), &block),
-            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>(&r), &block),
-            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>(&r), &block),
+            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>(&r, None), &block),
+            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>(&r, None), &block),
+            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>(&r, None), &block),
+            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>(&r, None), &block),
             4 => super::TriangleTest::survivors(&kernel, &block),
-            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>(&r), &block),
+            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>(&r, None), &block),
         };
         let hits = hit_lanes(&ray, &block);
         assert_eq!(

@@ -3,12 +3,13 @@
 
 use alloc::vec::Vec;
 
-use crate::accel::{run_query, Aabb, RayQuery};
+use crate::accel::{run_query, Aabb, AcceptingQuery, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
+use crate::triangle::Accept;
 
 mod build;
 mod clip;
@@ -252,6 +253,7 @@ impl KdTree {
         run_query(
             mesh,
             ray,
+            None,
             Walk::<true, false> {
                 tree: self,
                 mesh,
@@ -267,29 +269,35 @@ impl RayQuery for KdTree {
     }
 
     fn intersect(&self, mesh: &TriMesh, ray: &Ray) -> Hit {
-        let work = &mut KdWork::default();
-        run_query(
-            mesh,
-            ray,
-            Walk::<false, false> {
-                tree: self,
-                mesh,
-                work,
-            },
-        )
+        self.intersect_accepting(mesh, ray, None)
     }
 
     fn occluded(&self, mesh: &TriMesh, ray: &Ray) -> bool {
+        self.occluded_accepting(mesh, ray, None)
+    }
+}
+
+impl AcceptingQuery for KdTree {
+    // Out of line, so plain queries share this one copy of the walks.
+    #[inline(never)]
+    fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
         let work = &mut KdWork::default();
-        run_query(
+        let walk = Walk::<false, false> {
+            tree: self,
             mesh,
-            ray,
-            Walk::<false, true> {
-                tree: self,
-                mesh,
-                work,
-            },
-        )
-        .is_hit()
+            work,
+        };
+        run_query(mesh, ray, accept, walk)
+    }
+
+    #[inline(never)]
+    fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
+        let work = &mut KdWork::default();
+        let walk = Walk::<false, true> {
+            tree: self,
+            mesh,
+            work,
+        };
+        run_query(mesh, ray, accept, walk).is_hit()
     }
 }

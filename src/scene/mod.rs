@@ -1,16 +1,23 @@
 //! A built scene: the validated mesh, the structure in use, and the report of how it was chosen.
 
+use alloc::vec::Vec;
+
 use crate::accel::grid::{GridParams, UniformGrid};
 use crate::accel::kdtree::{KdTree, KdTreeParams};
-use crate::accel::RayQuery;
-use crate::budget::{MemoryBudget, MemoryMonitor};
+use crate::accel::{AcceptingQuery, RayQuery};
+use crate::budget::{bytes_of, MemoryBudget, MemoryMonitor};
 use crate::error::BuildError;
+use crate::geometry::{Conditions, Geometry, HitEx, RayEx, Visibility};
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
 use crate::select::decision::{kd_tree_confirmed, CostEstimate, Decision, OnlineSwitch};
 use crate::select::model::SceneFeatures;
-use crate::select::sample::{sample_grid, sample_kdtree, RaySource, SampleParams};
+use crate::select::sample::{sample_kdtree, RaySource, SampleParams};
+
+mod choose;
+
+use choose::choose;
 
 /// Which structure a scene should use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,6 +80,13 @@ impl BuildOptions {
     };
 }
 
+impl BuildOptions {
+    /// A budget with these options' limit and monitor.
+    fn budget(&self) -> MemoryBudget {
+        MemoryBudget::new(self.memory_limit).with_monitor(self.memory_monitor)
+    }
+}
+
 impl Default for BuildOptions {
     fn default() -> Self {
         BuildOptions::DEFAULT
@@ -93,6 +107,21 @@ impl Accel {
         match self {
             Accel::Grid(g) => g,
             Accel::KdTree(k) => k,
+        }
+    }
+
+    fn accepting(&self) -> &dyn AcceptingQuery {
+        match self {
+            Accel::Grid(g) => g,
+            Accel::KdTree(k) => k,
+        }
+    }
+
+    /// Gives the structure's bytes back to `budget` and drops it.
+    fn release(self, budget: &mut MemoryBudget) {
+        match self {
+            Accel::Grid(g) => g.release(budget),
+            Accel::KdTree(k) => k.release(budget),
         }
     }
 
@@ -163,6 +192,8 @@ pub struct SceneReport {
     pub kd_node_count: usize,
     /// Depth of the kd-tree's deepest leaf (zero when no kd-tree is held).
     pub kd_depth: u32,
+    /// Geometries in the scene (1 for a scene of one mesh).
+    pub geometry_count: usize,
 }
 
 /// An immutable scene: safe to query from many threads at once.
@@ -183,6 +214,10 @@ pub struct Scene {
     grid_samples: Option<SceneFeatures>,
     /// The calibration's constants the check prices work with.
     calibration: Calibration,
+    /// How rays see each geometry (empty for a scene built from one mesh).
+    geometries: Vec<Visibility>,
+    /// True when no geometry puts a condition on rays: plain queries skip the conditions.
+    plain: bool,
 }
 
 /// The report's estimate fields: NaN where nothing was estimated.
@@ -220,106 +255,178 @@ impl Scene {
         calibration: &Calibration,
         samples: Option<&dyn RaySource>,
     ) -> Result<Scene, BuildError> {
-        let mut budget =
-            MemoryBudget::new(options.memory_limit).with_monitor(options.memory_monitor);
+        let mut budget = options.budget();
         let mesh = TriMesh::from_source(src, &mut budget)?;
-        let first = match options.structure {
-            Structure::KdTree => Structure::KdTree,
-            _ => Structure::Grid,
-        };
-        let mut accel = match Accel::build(first, &mesh, options, &mut budget) {
-            Ok(a) => a,
+        Scene::select(mesh, Vec::new(), options, calibration, samples, &mut budget)
+    }
+
+    /// A scene of several geometries, numbered in the order given: their triangles, how rays see
+    /// each (mask, culled faces, filter: see [`crate::geometry`]), one structure over all of them
+    /// chosen as [`Scene::build`] chooses. A refused mesh is [`BuildError::InvalidGeometry`] naming
+    /// the geometry. Hits of [`Scene::intersect`] then name triangles by their index across all
+    /// geometries (the first geometry's, then the second's, …); [`Scene::intersect_ex`] gives the
+    /// geometry and the index within it.
+    pub fn build_geometries(
+        geometries: Vec<Geometry<'_>>,
+        options: &BuildOptions,
+        calibration: &Calibration,
+        samples: Option<&dyn RaySource>,
+    ) -> Result<Scene, BuildError> {
+        let mut budget = options.budget();
+        let mut sources: Vec<&dyn MeshSource> = budget.vec(geometries.len(), "geometry list")?;
+        sources.extend(geometries.iter().map(|g| g.mesh));
+        let mesh = TriMesh::from_sources(&sources, &mut budget);
+        budget.free(sources);
+        let mesh = mesh?;
+        let mut seen: Vec<Visibility> = match budget.vec(geometries.len(), "geometries") {
+            Ok(v) => v,
             Err(e) => {
                 mesh.release(&mut budget);
                 return Err(e);
             }
         };
-        let mut outcome = Outcome::Forced;
-        let mut estimate = None;
-        let mut online = None;
-        let mut grid_samples = None;
-        let sample_params = options.samples.for_budget(options.expected_rays);
-        if let (Structure::Auto, Accel::Grid(grid)) = (options.structure, &accel) {
-            let features = sample_grid(grid, &mesh, samples, &sample_params);
-            let e = calibration.estimate(&features);
-            estimate = Some(e);
-            if options.expected_rays == 0 {
-                outcome = Outcome::OnlineOnGrid;
-                online = Some(OnlineSwitch::new(e));
-            } else {
-                outcome = match e.decide(options.expected_rays) {
-                    Decision::GridFasterPerRay => Outcome::GridFasterPerRay,
-                    Decision::BelowBreakEven => Outcome::BelowBreakEven,
-                    Decision::AboveBreakEven => Outcome::AboveBreakEven,
-                };
+        seen.extend(geometries.into_iter().map(|g| Visibility {
+            mask: g.mask,
+            flags: g.flags,
+            filter: g.filter,
+        }));
+        Scene::select(mesh, seen, options, calibration, samples, &mut budget)
+    }
+
+    /// The scene over `mesh` (already charged to `budget`) with the structure the selection
+    /// chooses; the mesh is released if that fails.
+    fn select(
+        mesh: TriMesh,
+        geometries: Vec<Visibility>,
+        options: &BuildOptions,
+        calibration: &Calibration,
+        samples: Option<&dyn RaySource>,
+        budget: &mut MemoryBudget,
+    ) -> Result<Scene, BuildError> {
+        let choice = match choose(&mesh, options, calibration, samples, budget) {
+            Ok(c) => c,
+            Err(e) => {
+                mesh.release(budget);
+                return Err(e);
             }
-            if outcome == Outcome::AboveBreakEven {
-                // The grid goes first, so the limit need hold only the mesh and the kd-tree.
-                if let Accel::Grid(g) = accel {
-                    g.release(&mut budget);
-                }
-                accel = match Accel::build(Structure::KdTree, &mesh, options, &mut budget) {
-                    Ok(a) => a,
-                    Err(e) => {
-                        mesh.release(&mut budget);
-                        return Err(e);
-                    }
-                };
-                // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the
-                // same sample rays goes, and the grid (linear, quick) is built again.
-                if let Accel::KdTree(tree) = &accel {
-                    let kd = sample_kdtree(tree, &mesh, samples, &sample_params);
-                    if !kd_tree_confirmed(calibration, &features, &kd) {
-                        if let Accel::KdTree(t) = accel {
-                            t.release(&mut budget);
-                        }
-                        outcome = Outcome::GridFasterPerRay;
-                        accel = match Accel::build(Structure::Grid, &mesh, options, &mut budget) {
-                            Ok(a) => a,
-                            Err(e) => {
-                                mesh.release(&mut budget);
-                                return Err(e);
-                            }
-                        };
-                    }
-                }
-            }
-            if samples.is_none() {
-                grid_samples = Some(features);
-            }
-        }
-        let [grid_ray_seconds, kd_ray_seconds, kd_build_seconds, break_even_rays] =
-            estimate_fields(estimate.as_ref());
+        };
+        let plain = geometries.iter().all(Visibility::is_plain);
         let mut scene = Scene {
             mesh,
-            accel,
+            accel: choice.accel,
             report: SceneReport {
                 structure: Structure::Grid,
-                outcome,
+                outcome: Outcome::Forced,
                 triangle_count: 0,
                 memory_bytes: 0,
                 grid_resolution: [0; 3],
-                grid_ray_seconds,
-                kd_ray_seconds,
-                kd_build_seconds,
-                break_even_rays,
+                grid_ray_seconds: f64::NAN,
+                kd_ray_seconds: f64::NAN,
+                kd_build_seconds: f64::NAN,
+                break_even_rays: f64::NAN,
                 expected_rays: options.expected_rays,
                 references_per_triangle: 0.0,
                 kd_node_count: 0,
                 kd_depth: 0,
+                geometry_count: 0,
             },
             rays_traced: 0,
             options: *options,
-            online,
-            grid_samples,
+            online: None,
+            grid_samples: None,
             calibration: *calibration,
+            geometries,
+            plain,
         };
+        scene.take_choice_facts(
+            choice.outcome,
+            choice.estimate,
+            choice.online,
+            choice.grid_samples,
+        );
         scene.refresh_report();
         Ok(scene)
     }
 
+    /// Records what a selection found (everything of a [`Choice`] but its structure).
+    fn take_choice_facts(
+        &mut self,
+        outcome: Outcome,
+        estimate: Option<CostEstimate>,
+        online: Option<OnlineSwitch>,
+        grid_samples: Option<SceneFeatures>,
+    ) {
+        let [g, k, b, w] = estimate_fields(estimate.as_ref());
+        let r = &mut self.report;
+        (
+            r.outcome,
+            r.grid_ray_seconds,
+            r.kd_ray_seconds,
+            r.kd_build_seconds,
+        ) = (outcome, g, k, b);
+        r.break_even_rays = w;
+        self.online = online;
+        self.grid_samples = grid_samples;
+    }
+
+    /// New positions for the vertices of geometry `g` (`vertex(i)` for each of its vertices; same
+    /// count and topology; a scene of one mesh is geometry 0), then the structure rebuilt as a new
+    /// build would choose it: the grid (linear time) when the scene was built for the grid, the
+    /// kd-tree when built for it, and with `Auto` the selection run again on the moved mesh with
+    /// the library's sample rays and the scene's budget, so a kd-tree is built only when the
+    /// selector says it pays. The new structure is built while the old one is held (the memory
+    /// limit must hold both, and a copy of the geometry's old triangles). On any failure (a
+    /// non-finite coordinate, no such geometry, the memory limit, the monitor) the scene is as it
+    /// was and the error is returned. The report then describes what the scene holds.
+    pub fn set_vertices(
+        &mut self,
+        g: usize,
+        vertex: &dyn Fn(usize) -> [f32; 3],
+    ) -> Result<(), BuildError> {
+        if g >= self.mesh.geometry_count() {
+            return Err(BuildError::InvalidArgument {
+                what: "no such geometry",
+            });
+        }
+        let mut budget = self.options.budget();
+        budget.charge(self.memory_bytes(), "the scene as it is")?;
+        let range = self.mesh.geometry_start(g) as usize..self.mesh.geometry_start(g + 1) as usize;
+        let mut saved = budget.vec(range.len(), "the geometry's old triangles")?;
+        saved.extend_from_slice(&self.mesh.triangles()[range]);
+        self.mesh.set_vertices(g, vertex)?;
+        match choose(
+            &self.mesh,
+            &self.options,
+            &self.calibration,
+            None,
+            &mut budget,
+        ) {
+            Ok(choice) => {
+                self.accel = choice.accel;
+                self.take_choice_facts(
+                    choice.outcome,
+                    choice.estimate,
+                    choice.online,
+                    choice.grid_samples,
+                );
+                self.refresh_report();
+                Ok(())
+            }
+            Err(e) => {
+                self.mesh.restore_triangles(g, &saved);
+                Err(e)
+            }
+        }
+    }
+
+    /// Bytes the scene holds (mesh, structure, geometries' conditions).
+    fn memory_bytes(&self) -> usize {
+        self.mesh.memory_bytes() + self.accel.memory_bytes() + bytes_of(&self.geometries)
+    }
+
     /// Brings the report's structure fields up to date with the structure held.
     fn refresh_report(&mut self) {
+        self.report.memory_bytes = self.memory_bytes();
         let (mesh, accel, r) = (&self.mesh, &self.accel, &mut self.report);
         let live = mesh.len() - mesh.degenerate_count();
         (r.grid_resolution, r.kd_node_count, r.kd_depth) = match accel {
@@ -328,7 +435,7 @@ impl Scene {
         };
         r.structure = accel.structure();
         r.triangle_count = mesh.len();
-        r.memory_bytes = mesh.memory_bytes() + accel.memory_bytes();
+        r.geometry_count = mesh.geometry_count();
         r.references_per_triangle = if live == 0 {
             0.0
         } else {
@@ -357,12 +464,8 @@ impl Scene {
         if !switch {
             return Ok(());
         }
-        let mut budget =
-            MemoryBudget::new(self.options.memory_limit).with_monitor(self.options.memory_monitor);
-        budget.charge(
-            self.mesh.memory_bytes() + self.accel.memory_bytes(),
-            "the scene's mesh and grid",
-        )?;
+        let mut budget = self.options.budget();
+        budget.charge(self.memory_bytes(), "the scene's mesh and grid")?;
         let tree = KdTree::build(&self.mesh, &self.options.kdtree, &mut budget)?;
         if let Some(grid) = &self.grid_samples {
             let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
@@ -392,16 +495,80 @@ impl Scene {
         self.rays_traced
     }
 
-    /// The closest hit in `[tmin, tmax]` (ties to the lowest primitive id), or [`Hit::MISS`].
+    /// The closest hit in `[tmin, tmax]` (ties to the lowest primitive id), or [`Hit::MISS`]: in a
+    /// scene of several geometries, the closest one their conditions accept for a ray that sees
+    /// every mask and culls nothing itself, `prim` counting across geometries.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Hit {
-        self.accel.query().intersect(&self.mesh, ray)
+        if self.plain {
+            self.accel.query().intersect(&self.mesh, ray)
+        } else {
+            self.intersect_accepted(&RayEx::new(*ray))
+        }
     }
 
-    /// True when anything is hit in `[tmin, tmax]`.
+    /// True when anything is hit in `[tmin, tmax]` (anything the geometries' conditions accept).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
-        self.accel.query().occluded(&self.mesh, ray)
+        if self.plain {
+            self.accel.query().occluded(&self.mesh, ray)
+        } else {
+            self.occluded_accepted(&RayEx::new(*ray))
+        }
+    }
+
+    /// The closest hit in `[tmin, tmax]` that passes the ray's mask and culling and the geometry's
+    /// mask, culling and filter, ties to the lowest `(geom, prim)`, with its geometry, its index in
+    /// the geometry and its normal; [`HitEx::MISS`] when there is none. Bit-identical on every
+    /// structure. Conditions cost time only per candidate hit, not per triangle tested.
+    #[inline]
+    pub fn intersect_ex(&self, ray: &RayEx) -> HitEx {
+        let hit = if self.sees_plainly(ray) {
+            self.accel.query().intersect(&self.mesh, &ray.ray)
+        } else {
+            self.intersect_accepted(ray)
+        };
+        HitEx::of(&self.mesh, &hit)
+    }
+
+    /// True when [`Scene::intersect_ex`] would hit (it stops at the first accepted hit, so a filter
+    /// is called for fewer candidates).
+    #[inline]
+    pub fn occluded_ex(&self, ray: &RayEx) -> bool {
+        if self.sees_plainly(ray) {
+            self.accel.query().occluded(&self.mesh, &ray.ray)
+        } else {
+            self.occluded_accepted(ray)
+        }
+    }
+
+    /// True when no condition can refuse a hit of `ray`.
+    #[inline(always)]
+    fn sees_plainly(&self, ray: &RayEx) -> bool {
+        // A plain scene's geometries have every mask bit, so any nonzero mask sees them all.
+        self.plain && ray.flags == 0 && ray.mask != 0
+    }
+
+    fn intersect_accepted(&self, ray: &RayEx) -> Hit {
+        let conditions = Conditions {
+            mesh: &self.mesh,
+            geometries: &self.geometries,
+            ray,
+        };
+        self.accel
+            .accepting()
+            .intersect_accepting(&self.mesh, &ray.ray, Some(&conditions))
+    }
+
+    fn occluded_accepted(&self, ray: &RayEx) -> bool {
+        let conditions = Conditions {
+            mesh: &self.mesh,
+            geometries: &self.geometries,
+            ray,
+        };
+        self.accel
+            .accepting()
+            .occluded_accepting(&self.mesh, &ray.ray, Some(&conditions))
     }
 
     /// The validated mesh.

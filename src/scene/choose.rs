@@ -1,0 +1,90 @@
+//! The selection: which structure a scene builds over its validated mesh, and why (used by the
+//! build and again when vertices move).
+
+use super::{Accel, BuildOptions, Outcome, Structure};
+use crate::budget::MemoryBudget;
+use crate::error::BuildError;
+use crate::mesh::TriMesh;
+use crate::select::calibration::Calibration;
+use crate::select::decision::{kd_tree_confirmed, CostEstimate, Decision, OnlineSwitch};
+use crate::select::model::SceneFeatures;
+use crate::select::sample::{sample_grid, sample_kdtree, RaySource};
+
+/// What the selection built and what it learnt on the way.
+pub(super) struct Choice {
+    /// The structure to answer with.
+    pub accel: Accel,
+    /// Why.
+    pub outcome: Outcome,
+    /// The selector's estimate (`Auto` only).
+    pub estimate: Option<CostEstimate>,
+    /// The unknown-budget rule, while on the grid with `Auto` and no budget.
+    pub online: Option<OnlineSwitch>,
+    /// The library's sample rays on the grid (`Auto` with library-made samples only).
+    pub grid_samples: Option<SceneFeatures>,
+}
+
+/// Builds the structure `options` ask for over `mesh`. `Auto` builds the grid, traces the sample
+/// rays (`samples`, or the library's) through it, estimates the costs with `calibration`, and then:
+/// with a known `expected_rays`, keeps the grid or replaces it by the kd-tree (the grid is released
+/// first, so the memory limit must hold the mesh and the kd-tree) and keeps that kd-tree only if
+/// it saves work on the same samples; with an unknown budget, stays on the grid. What it built is
+/// released on failure; `mesh` is the caller's.
+pub(super) fn choose(
+    mesh: &TriMesh,
+    options: &BuildOptions,
+    calibration: &Calibration,
+    samples: Option<&dyn RaySource>,
+    budget: &mut MemoryBudget,
+) -> Result<Choice, BuildError> {
+    let first = match options.structure {
+        Structure::KdTree => Structure::KdTree,
+        _ => Structure::Grid,
+    };
+    let mut accel = Accel::build(first, mesh, options, budget)?;
+    let grid = match (&accel, options.structure) {
+        (Accel::Grid(grid), Structure::Auto) => grid,
+        _ => {
+            return Ok(Choice {
+                accel,
+                outcome: Outcome::Forced,
+                estimate: None,
+                online: None,
+                grid_samples: None,
+            })
+        }
+    };
+    let sample_params = options.samples.for_budget(options.expected_rays);
+    let features = sample_grid(grid, mesh, samples, &sample_params);
+    let estimate = calibration.estimate(&features);
+    let mut outcome = match options.expected_rays {
+        0 => Outcome::OnlineOnGrid,
+        budget_rays => match estimate.decide(budget_rays) {
+            Decision::GridFasterPerRay => Outcome::GridFasterPerRay,
+            Decision::BelowBreakEven => Outcome::BelowBreakEven,
+            Decision::AboveBreakEven => Outcome::AboveBreakEven,
+        },
+    };
+    if outcome == Outcome::AboveBreakEven {
+        // The grid goes first, so the limit need hold only the mesh and the kd-tree.
+        accel.release(budget);
+        accel = Accel::build(Structure::KdTree, mesh, options, budget)?;
+        // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the same
+        // sample rays goes, and the grid (linear, quick) is built again.
+        if let Accel::KdTree(tree) = &accel {
+            let kd = sample_kdtree(tree, mesh, samples, &sample_params);
+            if !kd_tree_confirmed(calibration, &features, &kd) {
+                accel.release(budget);
+                outcome = Outcome::GridFasterPerRay;
+                accel = Accel::build(Structure::Grid, mesh, options, budget)?;
+            }
+        }
+    }
+    Ok(Choice {
+        accel,
+        outcome,
+        estimate: Some(estimate),
+        online: (outcome == Outcome::OnlineOnGrid).then(|| OnlineSwitch::new(estimate)),
+        grid_samples: samples.is_none().then_some(features),
+    })
+}
