@@ -163,7 +163,15 @@ static void test_layouts(void) {
   CHECK(offsetof(rq_scene_report, references_per_triangle) == 88);
   CHECK(offsetof(rq_scene_report, kd_node_count) == 96);
   CHECK(offsetof(rq_scene_report, kd_depth) == 104);
-  CHECK(sizeof(rq_scene_report) == 112);
+  CHECK(offsetof(rq_scene_report, geometry_count) == 112);
+  CHECK(sizeof(rq_scene_report) == 120);
+  CHECK(sizeof(rq_ray_ex) == 40);
+  CHECK(sizeof(rq_hit_ex) == 32);
+  CHECK(offsetof(rq_geometry_desc, mesh) == 8);
+  CHECK(offsetof(rq_geometry_desc, mask) == 48);
+  CHECK(offsetof(rq_geometry_desc, flags) == 52);
+  CHECK(offsetof(rq_geometry_desc, filter) == 56);
+  CHECK(sizeof(rq_geometry_desc) == 72);
 #endif
 }
 

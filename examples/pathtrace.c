@@ -14,12 +14,16 @@
  *   --budget grid     force the grid.
  *   --budget kdtree   force the kd-tree.
  *
- * Rendering: per sample, a jittered camera ray, then up to MAX_BOUNCES diffuse bounces (cosine-
- * weighted about the geometric normal turned towards the ray, constant albedo); rays that escape see a
- * sky. No next-event estimation, so the image is noisy at low spp. Rays are traced as a wavefront: all
- * primary rays of a pass in one rq_scene_intersect_n call, then all surviving first bounces, and so
- * on. The random numbers depend only on (pixel, pass, bounce), and rayq's hits are exact (ties go to
- * the lowest primitive id), so every --budget mode writes the same image.
+ * The scene has two geometries (rq_scene_build_geometries): the OBJ mesh (geometry 0, a warm
+ * material) and a ground square below it (geometry 1, a grey checker); the shader picks the material
+ * by rq_hit_ex.geom and takes the geometric normal from rq_hit_ex.ng. Rendering: per sample, a
+ * jittered camera ray, then up to MAX_BOUNCES diffuse bounces (cosine-weighted about the normal
+ * turned towards the ray); at every hit a shadow ray towards the sun (next-event estimation), and rays
+ * that escape see a sky. Rays are traced as a wavefront: all primary rays of a pass in one
+ * rq_scene_intersect_ex_n call, all their shadow rays in one rq_scene_occluded_n call, then all
+ * surviving first bounces, and so on. The random numbers depend only on (pixel, pass, bounce), and
+ * rayq's hits are exact (ties go to the lowest (geometry, triangle)), so every --budget mode writes
+ * the same image.
  *
  * Build (repository root; the OBJ helper needs --features obj and -DRQ_WITH_OBJ):
  *
@@ -48,7 +52,7 @@
 #endif
 
 #define MAX_BOUNCES 2      /* diffuse bounces after the camera ray */
-#define ALBEDO 0.7f        /* of every surface; < 1 so that light dies out */
+#define SUN 2.0f           /* irradiance from the sun on a surface facing it */
 #define PI_F 3.14159265358979f
 
 /* ---- small helpers ----------------------------------------------------------------------------- */
@@ -182,10 +186,25 @@ static vec3 normalize(vec3 a) {
   float l = sqrtf(dot(a, a));
   return l > 0.0f ? scale(a, 1.0f / l) : a;
 }
-static vec3 ray_org(const rq_ray *r) { return v3(r->org[0], r->org[1], r->org[2]); }
-static vec3 ray_dir(const rq_ray *r) { return v3(r->dir[0], r->dir[1], r->dir[2]); }
 
-static void set_ray(rq_ray *r, vec3 org, vec3 dir, float tmin) {
+static vec3 ray_ex_org(const rq_ray_ex *r) { return v3(r->org[0], r->org[1], r->org[2]); }
+static vec3 ray_ex_dir(const rq_ray_ex *r) { return v3(r->dir[0], r->dir[1], r->dir[2]); }
+
+/* A ray that sees every geometry and both faces. */
+static void set_ray(rq_ray_ex *r, vec3 org, vec3 dir, float tmin) {
+  r->org[0] = org.x;
+  r->org[1] = org.y;
+  r->org[2] = org.z;
+  r->tmin = tmin;
+  r->dir[0] = dir.x;
+  r->dir[1] = dir.y;
+  r->dir[2] = dir.z;
+  r->tmax = INFINITY;
+  r->mask = 0xFFFFFFFFu;
+  r->flags = 0;
+}
+
+static void set_shadow_ray(rq_ray *r, vec3 org, vec3 dir, float tmin) {
   r->org[0] = org.x;
   r->org[1] = org.y;
   r->org[2] = org.z;
@@ -196,20 +215,10 @@ static void set_ray(rq_ray *r, vec3 org, vec3 dir, float tmin) {
   r->tmax = INFINITY;
 }
 
-/* Vertex `i` of a mesh description (xyz at the start of each `vertex_stride`-byte record; memcpy
- * because the records need not be aligned). */
-static vec3 mesh_vertex(const rq_mesh_desc *m, uint32_t i) {
-  float p[3];
-  memcpy(p, (const unsigned char *)m->vertices + (size_t)i * m->vertex_stride, sizeof p);
-  return v3(p[0], p[1], p[2]);
-}
-
-/* The unit geometric normal of triangle `prim`, turned to face against `dir` (two-sided surfaces:
+/* The hit's unit geometric normal (rq_hit_ex.ng), turned to face against `dir` (two-sided surfaces:
  * OBJ winding is not reliable). */
-static vec3 facing_normal(const rq_mesh_desc *m, uint32_t prim, vec3 dir) {
-  const uint32_t *tri = &m->indices[3 * (size_t)prim];
-  vec3 p0 = mesh_vertex(m, tri[0]), p1 = mesh_vertex(m, tri[1]), p2 = mesh_vertex(m, tri[2]);
-  vec3 n = normalize(cross(sub(p1, p0), sub(p2, p0)));
+static vec3 facing_normal(const rq_hit_ex *h, vec3 dir) {
+  vec3 n = normalize(v3(h->ng[0], h->ng[1], h->ng[2]));
   return dot(n, dir) > 0.0f ? scale(n, -1.0f) : n;
 }
 
@@ -257,6 +266,8 @@ static vec3 from_y_up(vec3 v, int up) {
 typedef struct camera {
   vec3 eye, forward, right, up;
   vec3 world_up; /* for the sky */
+  vec3 sun;      /* unit direction towards the sun */
+  int up_axis;
   float tan_half, aspect;
 } camera;
 
@@ -265,7 +276,9 @@ typedef struct camera {
 static camera make_camera(const float lo[3], const float hi[3], int width, int height) {
   camera c;
   int up_axis = guess_up_axis(lo, hi);
+  c.up_axis = up_axis;
   c.world_up = from_y_up(v3(0.0f, 1.0f, 0.0f), up_axis);
+  c.sun = normalize(from_y_up(v3(-0.5f, 1.0f, 0.35f), up_axis));
   vec3 bmin = v3(lo[0], lo[1], lo[2]), bmax = v3(hi[0], hi[1], hi[2]);
   vec3 centre = scale(add(bmin, bmax), 0.5f);
   float radius = 0.5f * sqrtf(dot(sub(bmax, bmin), sub(bmax, bmin)));
@@ -323,60 +336,121 @@ typedef struct path {
   uint64_t rng;
 } path;
 
+/* The geometries of the scene, and so the materials: rq_hit_ex.geom picks one. */
+enum { GEOM_MODEL = 0, GEOM_GROUND = 1 };
+
 typedef struct renderer {
   rq_scene *scene;
-  const rq_mesh_desc *mesh;
   camera cam;
   int width, height;
-  float tmin; /* ray offset off a surface: 1e-5 of the scene's diagonal */
-  rq_ray *rays;
-  rq_hit *hits;
+  float tmin;        /* ray offset off a surface: 1e-5 of the scene's diagonal */
+  float checker;     /* size of the ground's checker squares */
+  rq_ray_ex *rays;
+  rq_hit_ex *hits;
+  rq_ray *shadow;    /* shadow[i] starts at hits[i] when lit[i] says it was traced */
+  uint8_t *occluded; /* 1 when shadow[i] is blocked */
+  vec3 *direct;      /* what the sun adds to pixel lit_pixel[i] if shadow[i] is not blocked */
+  size_t *lit_pixel;
   path *paths;
   float *accum; /* linear RGB sums, width * height * 3 */
   double trace_seconds;
 } renderer;
 
-/* Traces rays[0..n], timing only the library call. */
+/* The diffuse albedo at a hit: a warm colour on the model, a grey checker on the ground. */
+static vec3 albedo(const renderer *r, const rq_hit_ex *h, vec3 point) {
+  if (h->geom == GEOM_MODEL) {
+    return v3(0.8f, 0.55f, 0.35f);
+  }
+  int a = (r->cam.up_axis + 1) % 3, b = (r->cam.up_axis + 2) % 3;
+  float p[3] = {point.x, point.y, point.z};
+  int cell = (int)floorf(p[a] / r->checker) + (int)floorf(p[b] / r->checker);
+  return (cell & 1) ? v3(0.35f, 0.35f, 0.35f) : v3(0.7f, 0.7f, 0.7f);
+}
+
+/* Traces rays[0..n] (closest hits), timing only the library call. */
 static rq_status trace(renderer *r, size_t n) {
   double t0 = now_seconds();
-  rq_status s = rq_scene_intersect_n(r->scene, r->rays, r->hits, n);
+  rq_status s = rq_scene_intersect_ex_n(r->scene, r->rays, r->hits, n);
   r->trace_seconds += now_seconds() - t0;
   return s;
 }
 
-/* Shades the wavefront rays[0..n] after `trace`: escaped paths add the sky, paths that hit bounce
- * (compacted to the front of the arrays) unless `last`. Returns the number of paths that go on. */
-static size_t shade(renderer *r, size_t n, int last) {
-  size_t alive = 0;
+/* Traces shadow[0..n] in one batch (any hit), timing only the library call. */
+static rq_status trace_shadows(renderer *r, size_t n) {
+  double t0 = now_seconds();
+  rq_status s = rq_scene_occluded_n(r->scene, r->shadow, r->occluded, n);
+  r->trace_seconds += now_seconds() - t0;
+  return s;
+}
+
+/* Shades the wavefront rays[0..n] after `trace`: escaped paths add the sky; paths that hit get a
+ * shadow ray towards the sun (traced in one batch, then the sun's light added where it is not
+ * blocked) and bounce (compacted to the front of the arrays) unless `last`. `*shadow_rays` receives
+ * the number of shadow rays traced. Returns the number of paths that go on, or 0 with `*status` set. */
+static size_t shade(renderer *r, size_t n, int last, uint64_t *shadow_rays, rq_status *status) {
+  size_t lit = 0;
   for (size_t i = 0; i < n; i++) {
-    const rq_hit *h = &r->hits[i];
-    path p = r->paths[i];
-    vec3 dir = ray_dir(&r->rays[i]);
+    const rq_hit_ex *h = &r->hits[i];
+    path *p = &r->paths[i];
+    vec3 dir = ray_ex_dir(&r->rays[i]);
     if (h->prim == RQ_INVALID_ID) {
-      vec3 c = mul(p.throughput, sky(dir, r->cam.world_up));
-      float *px = &r->accum[3 * p.pixel];
+      vec3 c = mul(p->throughput, sky(dir, r->cam.world_up));
+      float *px = &r->accum[3 * p->pixel];
       px[0] += c.x;
       px[1] += c.y;
       px[2] += c.z;
       continue;
     }
-    if (last) {
-      continue; /* out of bounces: the path brings no light */
+    vec3 point = add(ray_ex_org(&r->rays[i]), scale(dir, h->t));
+    vec3 n = facing_normal(h, dir);
+    float cos_sun = dot(n, r->cam.sun);
+    /* The sun's light reflected towards the path (albedo / pi * SUN * cos, with the pi of the cosine-
+     * weighted bounces folded into SUN), if nothing blocks it. */
+    if (cos_sun > 0.0f) {
+      r->direct[lit] = mul(p->throughput, scale(albedo(r, h, point), SUN * cos_sun / PI_F));
+      r->lit_pixel[lit] = p->pixel;
+      set_shadow_ray(&r->shadow[lit], point, r->cam.sun, r->tmin);
+      lit++;
     }
-    vec3 hit_point = add(ray_org(&r->rays[i]), scale(dir, h->t));
-    vec3 n = facing_normal(r->mesh, h->prim, dir);
-    p.throughput = scale(p.throughput, ALBEDO);
+  }
+  *status = trace_shadows(r, lit);
+  if (*status != RQ_STATUS_OK) {
+    return 0;
+  }
+  *shadow_rays = lit;
+  for (size_t i = 0; i < lit; i++) {
+    if (!r->occluded[i]) {
+      float *px = &r->accum[3 * r->lit_pixel[i]];
+      px[0] += r->direct[i].x;
+      px[1] += r->direct[i].y;
+      px[2] += r->direct[i].z;
+    }
+  }
+  if (last) {
+    return 0; /* out of bounces */
+  }
+  size_t alive = 0;
+  for (size_t i = 0; i < n; i++) {
+    const rq_hit_ex *h = &r->hits[i];
+    if (h->prim == RQ_INVALID_ID) {
+      continue;
+    }
+    path p = r->paths[i];
+    vec3 dir = ray_ex_dir(&r->rays[i]);
+    vec3 point = add(ray_ex_org(&r->rays[i]), scale(dir, h->t));
+    vec3 nrm = facing_normal(h, dir);
+    p.throughput = mul(p.throughput, albedo(r, h, point));
     /* The new ray starts on the surface; tmin, not an offset of the origin, keeps it off the triangle
      * it left (the same tmin on every ray keeps the hits independent of the structure). */
-    set_ray(&r->rays[alive], hit_point, cosine_direction(n, &p.rng), r->tmin);
+    set_ray(&r->rays[alive], point, cosine_direction(nrm, &p.rng), r->tmin);
     r->paths[alive] = p;
     alive++;
   }
   return alive;
 }
 
-/* One sample per pixel: the camera rays in one batch, then each bounce's survivors in one batch.
- * `*rays` receives the number of rays traced. */
+/* One sample per pixel: the camera rays in one batch, their shadow rays in one batch, then each
+ * bounce's survivors the same way. `*rays` receives the number of rays traced (shadow rays too). */
 static rq_status render_pass(renderer *r, int pass, uint64_t *rays) {
   size_t n = 0;
   for (int y = 0; y < r->height; y++) {
@@ -397,7 +471,12 @@ static rq_status render_pass(renderer *r, int pass, uint64_t *rays) {
       return s;
     }
     *rays += n;
-    n = shade(r, n, depth == MAX_BOUNCES);
+    uint64_t shadow_rays = 0;
+    n = shade(r, n, depth == MAX_BOUNCES, &shadow_rays, &s);
+    if (s != RQ_STATUS_OK) {
+      return s;
+    }
+    *rays += shadow_rays;
   }
   return RQ_STATUS_OK;
 }
@@ -500,14 +579,15 @@ int main(int argc, char **argv) {
                                                                      : "kdtree (forced)");
 
   /* 2. Build options from the budget mode. The known budget is an upper bound: every path traced to
-   *    full depth. Paths that escape early trace fewer, so the real count is printed at the end. */
+   *    full depth with a shadow ray at every hit. Paths that escape early trace fewer, so the real
+   *    count is printed at the end. */
   rq_build_options options;
   rq_build_options_init(&options);
   uint64_t pixels = (uint64_t)a.width * (uint64_t)a.height;
   switch (a.budget) {
   case BUDGET_KNOWN:
     options.structure = RQ_STRUCTURE_AUTO;
-    options.expected_rays = pixels * (uint64_t)a.spp * (1 + MAX_BOUNCES);
+    options.expected_rays = pixels * (uint64_t)a.spp * 2 * (1 + MAX_BOUNCES);
     break;
   case BUDGET_UNKNOWN:
     options.structure = RQ_STRUCTURE_AUTO;
@@ -516,11 +596,35 @@ int main(int argc, char **argv) {
   case BUDGET_GRID: options.structure = RQ_STRUCTURE_GRID; break;
   case BUDGET_KDTREE: options.structure = RQ_STRUCTURE_KDTREE; break;
   }
+  /* The ground: a square below the model, three times its size, in the plane across the up axis at
+   *    the bottom of its box (geometry 1; the model is geometry 0). */
+  int up = guess_up_axis(lo, hi);
+  float ground_v[4][3];
+  const uint32_t ground_idx[6] = {0, 1, 2, 2, 1, 3};
+  {
+    int a1 = (up + 1) % 3, a2 = (up + 2) % 3;
+    float ext = fmaxf(hi[a1] - lo[a1], hi[a2] - lo[a2]);
+    for (int c = 0; c < 4; c++) {
+      ground_v[c][up] = lo[up] - 1e-3f * (hi[up] - lo[up]);
+      ground_v[c][a1] = 0.5f * (lo[a1] + hi[a1]) + ((c & 1) ? 1.5f : -1.5f) * ext;
+      ground_v[c][a2] = 0.5f * (lo[a2] + hi[a2]) + ((c & 2) ? 1.5f : -1.5f) * ext;
+    }
+    r.checker = ext / 4.0f;
+  }
+  rq_geometry_desc geometries[2];
+  rq_geometry_desc_init(&geometries[GEOM_MODEL]);
+  geometries[GEOM_MODEL].mesh = mesh;
+  rq_geometry_desc_init(&geometries[GEOM_GROUND]);
+  geometries[GEOM_GROUND].mesh.vertices = &ground_v[0][0];
+  geometries[GEOM_GROUND].mesh.vertex_count = 4;
+  geometries[GEOM_GROUND].mesh.vertex_stride = sizeof ground_v[0];
+  geometries[GEOM_GROUND].mesh.indices = ground_idx;
+  geometries[GEOM_GROUND].mesh.triangle_count = 2;
   double t0 = now_seconds();
-  s = rq_scene_build(&mesh, &options, NULL, &r.scene);
+  s = rq_scene_build_geometries(geometries, 2, &options, NULL, &r.scene);
   double build_seconds = now_seconds() - t0;
   if (s != RQ_STATUS_OK) {
-    exit_code = fail("rq_scene_build", s);
+    exit_code = fail("rq_scene_build_geometries", s);
     goto done;
   }
   rq_scene_report rep;
@@ -532,7 +636,6 @@ int main(int argc, char **argv) {
   printf("build: %.3f ms\n", build_seconds * 1e3);
 
   /* 3. The renderer: camera, ray offset, and wavefront arrays for one pass. */
-  r.mesh = &mesh;
   r.width = a.width;
   r.height = a.height;
   r.cam = make_camera(lo, hi, a.width, a.height);
@@ -542,11 +645,15 @@ int main(int argc, char **argv) {
     float d = sqrtf(dot(diag, diag));
     r.tmin = 1e-5f * (d > 0.0f ? d : 1.0f);
   }
-  r.rays = (rq_ray *)malloc((size_t)pixels * sizeof *r.rays);
-  r.hits = (rq_hit *)malloc((size_t)pixels * sizeof *r.hits);
+  r.rays = (rq_ray_ex *)malloc((size_t)pixels * sizeof *r.rays);
+  r.hits = (rq_hit_ex *)malloc((size_t)pixels * sizeof *r.hits);
+  r.shadow = (rq_ray *)malloc((size_t)pixels * sizeof *r.shadow);
+  r.occluded = (uint8_t *)malloc((size_t)pixels * sizeof *r.occluded);
+  r.direct = (vec3 *)malloc((size_t)pixels * sizeof *r.direct);
+  r.lit_pixel = (size_t *)malloc((size_t)pixels * sizeof *r.lit_pixel);
   r.paths = (path *)malloc((size_t)pixels * sizeof *r.paths);
   r.accum = (float *)calloc((size_t)pixels * 3, sizeof *r.accum);
-  if (!r.rays || !r.hits || !r.paths || !r.accum) {
+  if (!r.rays || !r.hits || !r.shadow || !r.occluded || !r.direct || !r.lit_pixel || !r.paths || !r.accum) {
     fprintf(stderr, "pathtrace: out of memory for %llu pixels\n", (unsigned long long)pixels);
     goto done;
   }
@@ -559,7 +666,7 @@ int main(int argc, char **argv) {
   for (int pass = 0; pass < a.spp; pass++) {
     uint64_t pass_rays = 0;
     if ((s = render_pass(&r, pass, &pass_rays)) != RQ_STATUS_OK) {
-      exit_code = fail("rq_scene_intersect_n", s);
+      exit_code = fail("tracing", s);
       goto done;
     }
     total_rays += pass_rays;
@@ -602,7 +709,7 @@ int main(int argc, char **argv) {
   printf("build: %.3f ms; render: %.3f ms (tracing %.3f ms, rq_scene_update %.3f ms); wrote %s\n",
          build_seconds * 1e3, render_seconds * 1e3, r.trace_seconds * 1e3, update_seconds * 1e3, a.out_path);
   printf("rays: %llu traced (budget bound %llu); %.3f M rays/s tracing, %.3f M rays/s build+render\n",
-         (unsigned long long)total_rays, (unsigned long long)(pixels * (uint64_t)a.spp * (1 + MAX_BOUNCES)),
+         (unsigned long long)total_rays, (unsigned long long)(pixels * (uint64_t)a.spp * 2 * (1 + MAX_BOUNCES)),
          r.trace_seconds > 0.0 ? (double)total_rays / r.trace_seconds * 1e-6 : 0.0,
          (double)total_rays / (build_seconds + render_seconds) * 1e-6);
   exit_code = EXIT_SUCCESS;
@@ -616,6 +723,10 @@ done:
   }
   free(r.accum);
   free(r.paths);
+  free(r.lit_pixel);
+  free(r.direct);
+  free(r.occluded);
+  free(r.shadow);
   free(r.hits);
   free(r.rays);
   rq_scene_free(r.scene);

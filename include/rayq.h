@@ -119,6 +119,45 @@ typedef uint32_t rq_outcome;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
+// Faces a geometry never reports (`rq_geometry_desc.flags`, a bitwise or). The front face is the
+// side from which the vertices (v0, v1, v2) appear counter-clockwise.
+enum rq_geometry_flags
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // No ray reports this geometry's back faces.
+  RQ_GEOMETRY_CULL_BACK_FACES = 1,
+  // No ray reports this geometry's front faces.
+  RQ_GEOMETRY_CULL_FRONT_FACES = 2,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum rq_geometry_flags rq_geometry_flags;
+#else
+typedef uint32_t rq_geometry_flags;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+// Faces a ray ignores (`rq_ray_ex.flags`, a bitwise or), in every geometry.
+enum rq_ray_flags
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // The ray reports no back face.
+  RQ_RAY_CULL_BACK_FACES = 1,
+  // The ray reports no front face.
+  RQ_RAY_CULL_FRONT_FACES = 2,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum rq_ray_flags rq_ray_flags;
+#else
+typedef uint32_t rq_ray_flags;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
 // Machine cost constants (opaque, immutable, shareable between threads).
 typedef struct rq_calibration rq_calibration;
 
@@ -151,24 +190,6 @@ typedef struct rq_allocator {
   rq_free_fn free;
 } rq_allocator;
 
-// Error callback: told the status and a NUL-terminated message that lives only during the call.
-typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
-
-#if defined(RQ_WITH_OBJ)
-// Options of `rq_obj_load_ex`. Fill with `rq_obj_load_options_init`, then set what you need; the
-// library reads only the fields the caller's `struct_size` covers (the others keep their defaults).
-typedef struct rq_obj_load_options {
-  // `sizeof(rq_obj_load_options)` as the caller knows it.
-  uint32_t struct_size;
-  // Called once when the load fails, on the calling thread, with the status and a message that
-  // names the file and, for what is wrong inside it, the line: `path:line: what` (valid only
-  // during the call). NULL = not called.
-  rq_error_fn on_error;
-  // Passed to `on_error`.
-  void *user;
-} rq_obj_load_options;
-#endif
-
 // An indexed triangle mesh in the caller's memory. The build copies what it needs.
 typedef struct rq_mesh_desc {
   // Vertex data: xyz (three floats) at the start of each `vertex_stride`-byte record. Need not be
@@ -184,9 +205,64 @@ typedef struct rq_mesh_desc {
   size_t triangle_count;
 } rq_mesh_desc;
 
-// Panic hook: told a NUL-terminated message (valid during the call only). It may log; it must not
-// call rayq. When it returns, the library calls `abort()`.
-typedef void (*rq_panic_hook_fn)(void *user, const char *message);
+// A ray with conditions (40 bytes): it sees geometry `g` when `(mask & g.mask) != 0`, and ignores
+// the faces `flags` names (`rq_ray_flags`).
+typedef struct rq_ray_ex {
+  // Origin.
+  float org[3];
+  // Smallest accepted t.
+  float tmin;
+  // Direction.
+  float dir[3];
+  // Largest accepted t (may be INFINITY).
+  float tmax;
+  // Which geometries the ray sees.
+  uint32_t mask;
+  // `rq_ray_flags`.
+  uint32_t flags;
+} rq_ray_ex;
+
+// A hit in a scene of several geometries (32 bytes). `prim` is the triangle's index in geometry
+// `geom`; `ng = (v1 - v0) x (v2 - v0)`, not normalized. A miss: `t = +INFINITY, u = v = 0,
+// prim = geom = RQ_INVALID_ID, ng = 0`.
+typedef struct rq_hit_ex {
+  // Ray parameter.
+  float t;
+  // Barycentric weight of the triangle's second vertex.
+  float u;
+  // Barycentric weight of the triangle's third vertex.
+  float v;
+  // The triangle's index in its geometry, or `RQ_INVALID_ID`.
+  uint32_t prim;
+  // The geometry's index, or `RQ_INVALID_ID`.
+  uint32_t geom;
+  // Geometric normal `(v1 - v0) x (v2 - v0)`.
+  float ng[3];
+} rq_hit_ex;
+
+// Any-hit filter: called for a candidate hit of its geometry (one the ray meets, in its mask and not
+// culled); returns false to ignore the candidate. Candidates come in any order, a triangle's possibly
+// more than once; called on the querying thread, from every thread that queries.
+typedef bool (*rq_filter_fn)(void *user,
+                             const struct rq_ray_ex *ray,
+                             const struct rq_hit_ex *candidate);
+
+// One geometry of a scene. Fill with `rq_geometry_desc_init`, then set the mesh and what you need.
+// The library reads only the fields `struct_size` covers.
+typedef struct rq_geometry_desc {
+  // `sizeof(rq_geometry_desc)` as the caller knows it (the same for every element of an array).
+  uint32_t struct_size;
+  // The triangles (copied at build).
+  struct rq_mesh_desc mesh;
+  // Seen by rays with `(ray.mask & mask) != 0`; default `0xFFFFFFFF`.
+  uint32_t mask;
+  // `rq_geometry_flags`; default 0.
+  uint32_t flags;
+  // NULL (default): every candidate counts.
+  rq_filter_fn filter;
+  // Passed to `filter`.
+  void *filter_user;
+} rq_geometry_desc;
 
 // A ray `org + t*dir`, `tmin <= t <= tmax` (32 bytes). `dir` need not be normalized.
 typedef struct rq_ray {
@@ -199,6 +275,9 @@ typedef struct rq_ray {
   // Largest accepted t (may be INFINITY).
   float tmax;
 } rq_ray;
+
+// Error callback: told the status and a NUL-terminated message that lives only during the call.
+typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
 
 // Memory monitor: told the bytes a build would hold after the allocation it is about to make;
 // returns true to allow it, false to cancel the build.
@@ -232,6 +311,25 @@ typedef struct rq_build_options {
   // Passed to `memory_monitor`.
   void *memory_monitor_user;
 } rq_build_options;
+
+#if defined(RQ_WITH_OBJ)
+// Options of `rq_obj_load_ex`. Fill with `rq_obj_load_options_init`, then set what you need; the
+// library reads only the fields the caller's `struct_size` covers (the others keep their defaults).
+typedef struct rq_obj_load_options {
+  // `sizeof(rq_obj_load_options)` as the caller knows it.
+  uint32_t struct_size;
+  // Called once when the load fails, on the calling thread, with the status and a message that
+  // names the file and, for what is wrong inside it, the line: `path:line: what` (valid only
+  // during the call). NULL = not called.
+  rq_error_fn on_error;
+  // Passed to `on_error`.
+  void *user;
+} rq_obj_load_options;
+#endif
+
+// Panic hook: told a NUL-terminated message (valid during the call only). It may log; it must not
+// call rayq. When it returns, the library calls `abort()`.
+typedef void (*rq_panic_hook_fn)(void *user, const char *message);
 
 // A hit (16 bytes). Miss: `t = +INFINITY, u = v = 0, prim = RQ_INVALID_ID`.
 typedef struct rq_hit {
@@ -275,6 +373,8 @@ typedef struct rq_scene_report {
   size_t kd_node_count;
   // Depth of the kd-tree's deepest leaf (0 when no kd-tree is held).
   uint32_t kd_depth;
+  // Geometries in the scene (1 for a scene built by `rq_scene_build`).
+  size_t geometry_count;
 } rq_scene_report;
 
 #ifdef __cplusplus
@@ -329,6 +429,98 @@ const struct rq_calibration *rq_calibration_builtin(void);
 // # Safety
 // `calib` is NULL, the built-in handle, or a live handle not used afterwards.
 void rq_calibration_free(struct rq_calibration *calib);
+
+// Fills `desc` with the defaults: no triangles, mask `0xFFFFFFFF`, no culling, no filter. Does
+// nothing when `desc` is NULL.
+//
+// # Safety
+// `desc` is NULL or points to writable memory of `sizeof(rq_geometry_desc)` bytes.
+void rq_geometry_desc_init(struct rq_geometry_desc *desc);
+
+// Builds a scene of `geometry_count` geometries (`geometries[i]` is geometry `i`; every element
+// has the caller's `sizeof(rq_geometry_desc)` in `struct_size`). Options, calibration, `*out` and
+// `on_error` as for `rq_scene_build`; a refused mesh is `RQ_STATUS_INVALID_MESH` (or
+// `RQ_STATUS_NULL_ARGUMENT`) with the geometry's index in the message; a flag outside
+// `rq_geometry_flags` is `RQ_STATUS_INVALID_ARGUMENT`. Hits of `rq_scene_intersect` name triangles
+// by their index across all geometries in order; `rq_scene_intersect_ex` gives geometry and local
+// index. `geometry_count == 0` builds an empty scene.
+//
+// # Safety
+// `geometries` readable for `geometry_count` elements (may be NULL when 0), each mesh as for
+// `rq_scene_build`. A filter and its user pointer stay valid, and callable from every thread that
+// queries, for as long as the scene lives; a filter must not call rayq on this scene.
+rq_status rq_scene_build_geometries(const struct rq_geometry_desc *geometries,
+                                    size_t geometry_count,
+                                    const struct rq_build_options *opts,
+                                    const struct rq_calibration *calib,
+                                    struct rq_scene **out);
+
+// The closest hit that passes the ray's and the geometries' conditions: true on a hit. `*out` is
+// always written when not NULL (a miss as `t = INFINITY, u = v = 0, prim = geom = RQ_INVALID_ID,
+// ng = 0`); a NULL scene or ray is a miss. Works on every scene (one built by `rq_scene_build` is
+// geometry 0 with mask `0xFFFFFFFF`).
+//
+// # Safety
+// `scene` is NULL or a live handle; `ray` NULL or readable; `out` NULL or writable.
+bool rq_scene_intersect_ex(const struct rq_scene *scene,
+                           const struct rq_ray_ex *ray,
+                           struct rq_hit_ex *out);
+
+// True when `rq_scene_intersect_ex` would hit; stops at the first accepted candidate. A NULL scene
+// or ray is not occluded.
+//
+// # Safety
+// `scene` is NULL or a live handle; `ray` NULL or readable.
+bool rq_scene_occluded_ex(const struct rq_scene *scene, const struct rq_ray_ex *ray);
+
+// `rq_scene_intersect_ex` for `n` rays into `hits[0..n]` (the arrays must not overlap). With a valid
+// scene, `n == 0` is a no-op that accepts NULL arrays; a NULL scene is `RQ_STATUS_NULL_ARGUMENT`.
+//
+// # Safety
+// `rays` readable and `hits` writable for `n` elements when `n > 0`.
+rq_status rq_scene_intersect_ex_n(const struct rq_scene *scene,
+                                  const struct rq_ray_ex *rays,
+                                  struct rq_hit_ex *hits,
+                                  size_t n);
+
+// `rq_scene_occluded` for `n` rays: `occluded[i]` = 1 when ray `i` is blocked, else 0. Checks as
+// for `rq_scene_intersect_n`.
+//
+// # Safety
+// `rays` readable and `occluded` writable for `n` elements when `n > 0`.
+rq_status rq_scene_occluded_n(const struct rq_scene *scene,
+                              const struct rq_ray *rays,
+                              uint8_t *occluded,
+                              size_t n);
+
+// `rq_scene_occluded_ex` for `n` rays: `occluded[i]` = 1 when ray `i` is blocked, else 0. Checks
+// as for `rq_scene_intersect_n`.
+//
+// # Safety
+// `rays` readable and `occluded` writable for `n` elements when `n > 0`.
+rq_status rq_scene_occluded_ex_n(const struct rq_scene *scene,
+                                 const struct rq_ray_ex *rays,
+                                 uint8_t *occluded,
+                                 size_t n);
+
+// New positions for the vertices of geometry `geom` (a scene from `rq_scene_build` is geometry 0):
+// as many as it was built with, xyz at the start of each `vertex_stride`-byte record, same topology.
+// The scene then rebuilds its structure as a new build with its options would: the grid (linear
+// time) or the kd-tree as forced, and with AUTO the selection again on the moved mesh (library
+// sample rays, the scene's `expected_rays`), so the kd-tree is built only when the selector says it
+// pays; `rq_scene_report_get` tells what it holds afterwards. The new structure is built while the
+// old one is held (the memory limit must hold both). On failure (RQ_STATUS_INVALID_ARGUMENT for no
+// such geometry, RQ_STATUS_INVALID_MESH for a non-finite coordinate or a stride below 12,
+// RQ_STATUS_MEMORY_LIMIT, RQ_STATUS_OUT_OF_MEMORY, RQ_STATUS_CANCELLED) the scene is unchanged and
+// usable. Not concurrently with queries or other calls on this scene.
+//
+// # Safety
+// `scene` is NULL or a live handle nobody else is using; `vertices` NULL or readable for the
+// geometry's vertex count records of `vertex_stride` bytes.
+rq_status rq_scene_set_vertices(struct rq_scene *scene,
+                                uint32_t geom,
+                                const float *vertices,
+                                size_t vertex_stride);
 
 #if defined(RQ_WITH_OBJ)
 // Fills `opts` with the defaults (no error callback). Does nothing when `opts` is NULL.

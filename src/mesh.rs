@@ -186,6 +186,11 @@ impl TriMesh {
         self.vertex_counts.len()
     }
 
+    /// Vertices of geometry `g` as its source gave them (`None` for no such geometry).
+    pub fn geometry_vertex_count(&self, g: usize) -> Option<usize> {
+        self.vertex_counts.get(g).copied()
+    }
+
     /// The first triangle of geometry `g` (and, for `g = geometry_count()`, the triangle count).
     pub fn geometry_start(&self, g: usize) -> u32 {
         self.starts

@@ -32,6 +32,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 const RUN_TESTS: &[&str] = &[
     "calibration",
     "embedded",
+    "geometries",
     "hostile_mesh",
     "lifecycle",
     "memory_monitor",
@@ -348,6 +349,11 @@ fn c_calibration() {
     let blob = root().join("calib").join("default.rqcal");
     let define = format!("-DRQ_DEFAULT_BLOB=\"{}\"", blob.display());
     run_c_test_with("calibration", &[&define]);
+}
+
+#[test]
+fn c_geometries() {
+    run_c_test("geometries");
 }
 
 #[test]

@@ -26,6 +26,7 @@ mod allocator;
 #[cfg(feature = "bare-rt")]
 mod bare_alloc;
 mod calibration;
+mod geometry;
 #[cfg(feature = "obj")]
 mod obj;
 mod panic;
@@ -34,6 +35,7 @@ mod types;
 
 pub use allocator::*;
 pub use calibration::*;
+pub use geometry::*;
 #[cfg(feature = "obj")]
 pub use obj::*;
 pub use panic::*;

@@ -149,7 +149,7 @@ impl RaySource for CallerRays {
 }
 
 /// The caller's strided arrays, checked for NULL and address overflow before the first read.
-struct RawMesh {
+pub(super) struct RawMesh {
     vertices: *const u8,
     vertex_count: usize,
     stride: usize,
@@ -160,7 +160,7 @@ struct RawMesh {
 impl RawMesh {
     /// # Safety
     /// The descriptor's pointers, when not NULL, must cover the sizes its counts imply.
-    unsafe fn new(d: &rq_mesh_desc) -> Result<RawMesh, MeshError> {
+    pub(super) unsafe fn new(d: &rq_mesh_desc) -> Result<RawMesh, MeshError> {
         if d.vertex_stride < 12 {
             return Err(MeshError::StrideTooSmall {
                 stride: d.vertex_stride,
@@ -247,69 +247,112 @@ pub unsafe extern "C" fn rq_scene_build(
     out: *mut *mut rq_scene,
 ) -> rq_status {
     boundary(|| {
-        // SAFETY: opts is NULL or a readable options struct (function contract).
-        let o = match unsafe { read_options(opts) } {
-            Ok(o) => o,
-            Err((status, text, o)) => {
-                return report_error(&o, status, &Message::new(format_args!("{text}")))
-            }
-        };
-        if mesh.is_null() || out.is_null() {
-            let text = if mesh.is_null() {
-                "mesh is NULL"
-            } else {
-                "out is NULL"
-            };
+        // SAFETY: opts and calib are NULL or valid (function contract).
+        unsafe {
+            build_scene(opts, calib, out, |options, calibration, samples| {
+                if mesh.is_null() {
+                    return Err(Refusal::Null("mesh is NULL"));
+                }
+                // SAFETY: mesh is not NULL and points to a descriptor (contract).
+                let desc = ptr::read_unaligned(mesh);
+                // SAFETY: the descriptor's arrays cover its counts (contract).
+                let raw = RawMesh::new(&desc).map_err(BuildError::InvalidMesh)?;
+                Ok(Scene::build_with_samples(
+                    &raw,
+                    options,
+                    calibration,
+                    samples,
+                )?)
+            })
+        }
+    })
+}
+
+/// Why a build was refused before or during the build.
+pub(super) enum Refusal {
+    /// A required pointer is NULL.
+    Null(&'static str),
+    /// The build failed.
+    Build(BuildError),
+}
+
+impl From<BuildError> for Refusal {
+    fn from(e: BuildError) -> Self {
+        Refusal::Build(e)
+    }
+}
+
+/// The part every scene build shares: reads the options and the calibration, runs `build` with the
+/// options as Rust sees them, the calibration and the caller's sample rays, and hands the scene to
+/// `*out` (or tells `on_error` why not).
+///
+/// # Safety
+/// As for [`rq_scene_build`]: `opts` and `calib` NULL or valid, `out` NULL or writable.
+pub(super) unsafe fn build_scene(
+    opts: *const rq_build_options,
+    calib: *const rq_calibration,
+    out: *mut *mut rq_scene,
+    build: impl FnOnce(&BuildOptions, &Calibration, Option<&dyn RaySource>) -> Result<Scene, Refusal>,
+) -> rq_status {
+    // SAFETY: opts is NULL or a readable options struct (function contract).
+    let o = match unsafe { read_options(opts) } {
+        Ok(o) => o,
+        Err((status, text, o)) => {
+            return report_error(&o, status, &Message::new(format_args!("{text}")))
+        }
+    };
+    if out.is_null() {
+        return report_error(
+            &o,
+            rq_status::RQ_STATUS_NULL_ARGUMENT,
+            &Message::new(format_args!("out is NULL")),
+        );
+    }
+    let calibration: &Calibration = if calib.is_null() {
+        Calibration::builtin()
+    } else {
+        // SAFETY: non-NULL calibration handles come from rq_calibration_* and point to a Calibration.
+        unsafe { &*(calib as *const Calibration) }
+    };
+    let options = BuildOptions {
+        structure: o.structure,
+        expected_rays: o.expected_rays,
+        memory_limit: o.memory_limit,
+        memory_monitor: o.memory_monitor,
+        ..BuildOptions::DEFAULT
+    };
+    let samples = CallerRays {
+        rays: o.sample_rays,
+        count: o.sample_ray_count,
+    };
+    let samples: Option<&dyn RaySource> = if o.sample_rays.is_null() {
+        None
+    } else {
+        Some(&samples)
+    };
+    let scene = match build(&options, calibration, samples) {
+        Ok(s) => s,
+        Err(Refusal::Null(text)) => {
             return report_error(
                 &o,
                 rq_status::RQ_STATUS_NULL_ARGUMENT,
                 &Message::new(format_args!("{text}")),
-            );
+            )
         }
-        // SAFETY: mesh is not NULL and points to a descriptor (contract).
-        let desc = unsafe { ptr::read_unaligned(mesh) };
-        // SAFETY: the descriptor's arrays cover its counts (contract).
-        let raw = match unsafe { RawMesh::new(&desc) } {
-            Ok(r) => r,
-            Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
+        Err(Refusal::Build(e)) => {
+            return report_error(&o, e.into(), &Message::new(format_args!("{e}")))
+        }
+    };
+    let Some(boxed) = try_box(scene) else {
+        let e = BuildError::OutOfMemory {
+            what: "scene handle",
+            bytes: size_of::<Scene>(),
         };
-        let calibration: &Calibration = if calib.is_null() {
-            Calibration::builtin()
-        } else {
-            // SAFETY: non-NULL calibration handles come from rq_calibration_* and point to a Calibration.
-            unsafe { &*(calib as *const Calibration) }
-        };
-        let options = BuildOptions {
-            structure: o.structure,
-            expected_rays: o.expected_rays,
-            memory_limit: o.memory_limit,
-            memory_monitor: o.memory_monitor,
-            ..BuildOptions::DEFAULT
-        };
-        let samples = CallerRays {
-            rays: o.sample_rays,
-            count: o.sample_ray_count,
-        };
-        let samples: Option<&dyn RaySource> = if o.sample_rays.is_null() {
-            None
-        } else {
-            Some(&samples)
-        };
-        let scene = match Scene::build_with_samples(&raw, &options, calibration, samples) {
-            Ok(s) => s,
-            Err(e) => return report_error(&o, e.into(), &Message::new(format_args!("{e}"))),
-        };
-        let Some(boxed) = try_box(scene) else {
-            let e = BuildError::OutOfMemory {
-                what: "scene handle",
-                bytes: size_of::<Scene>(),
-            };
-            return report_error(&o, e.into(), &Message::new(format_args!("{e}")));
-        };
-        // SAFETY: out is not NULL (checked) and writable (contract).
-        unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(boxed) as *mut rq_scene) };
-        rq_status::RQ_STATUS_OK
-    })
+        return report_error(&o, e.into(), &Message::new(format_args!("{e}")));
+    };
+    // SAFETY: out is not NULL (checked) and writable (contract).
+    unsafe { out.write_unaligned(alloc::boxed::Box::into_raw(boxed) as *mut rq_scene) };
+    rq_status::RQ_STATUS_OK
 }
 
 /// Frees a scene; NULL is ignored.
@@ -328,12 +371,12 @@ pub unsafe extern "C" fn rq_scene_free(scene: *mut rq_scene) {
 
 /// # Safety
 /// `scene` is NULL or a live handle.
-unsafe fn scene_ref<'a>(scene: *const rq_scene) -> Option<&'a Scene> {
+pub(super) unsafe fn scene_ref<'a>(scene: *const rq_scene) -> Option<&'a Scene> {
     // SAFETY: a non-NULL handle is a live Box<Scene> (contract).
     unsafe { (scene as *const Scene).as_ref() }
 }
 
-fn to_ray(r: &rq_ray) -> Ray {
+pub(super) fn to_ray(r: &rq_ray) -> Ray {
     Ray {
         org: Vec3::from(r.org),
         tmin: r.tmin,
@@ -496,6 +539,7 @@ pub unsafe extern "C" fn rq_scene_report_get(
         );
         write_covered!(out, size, kd_node_count, r.kd_node_count);
         write_covered!(out, size, kd_depth, r.kd_depth);
+        write_covered!(out, size, geometry_count, r.geometry_count);
         rq_status::RQ_STATUS_OK
     })
 }

@@ -195,6 +195,98 @@ pub struct rq_scene_report {
     pub kd_node_count: usize,
     /// Depth of the kd-tree's deepest leaf (0 when no kd-tree is held).
     pub kd_depth: u32,
+    /// Geometries in the scene (1 for a scene built by `rq_scene_build`).
+    pub geometry_count: usize,
+}
+
+/// Faces a geometry never reports (`rq_geometry_desc.flags`, a bitwise or). The front face is the
+/// side from which the vertices (v0, v1, v2) appear counter-clockwise.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_geometry_flags {
+    /// No ray reports this geometry's back faces.
+    RQ_GEOMETRY_CULL_BACK_FACES = 1,
+    /// No ray reports this geometry's front faces.
+    RQ_GEOMETRY_CULL_FRONT_FACES = 2,
+}
+
+/// Faces a ray ignores (`rq_ray_ex.flags`, a bitwise or), in every geometry.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_ray_flags {
+    /// The ray reports no back face.
+    RQ_RAY_CULL_BACK_FACES = 1,
+    /// The ray reports no front face.
+    RQ_RAY_CULL_FRONT_FACES = 2,
+}
+
+/// A ray with conditions (40 bytes): it sees geometry `g` when `(mask & g.mask) != 0`, and ignores
+/// the faces `flags` names (`rq_ray_flags`).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_ray_ex {
+    /// Origin.
+    pub org: [f32; 3],
+    /// Smallest accepted t.
+    pub tmin: f32,
+    /// Direction.
+    pub dir: [f32; 3],
+    /// Largest accepted t (may be INFINITY).
+    pub tmax: f32,
+    /// Which geometries the ray sees.
+    pub mask: u32,
+    /// `rq_ray_flags`.
+    pub flags: u32,
+}
+
+/// A hit in a scene of several geometries (32 bytes). `prim` is the triangle's index in geometry
+/// `geom`; `ng = (v1 - v0) x (v2 - v0)`, not normalized. A miss: `t = +INFINITY, u = v = 0,
+/// prim = geom = RQ_INVALID_ID, ng = 0`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_hit_ex {
+    /// Ray parameter.
+    pub t: f32,
+    /// Barycentric weight of the triangle's second vertex.
+    pub u: f32,
+    /// Barycentric weight of the triangle's third vertex.
+    pub v: f32,
+    /// The triangle's index in its geometry, or `RQ_INVALID_ID`.
+    pub prim: u32,
+    /// The geometry's index, or `RQ_INVALID_ID`.
+    pub geom: u32,
+    /// Geometric normal `(v1 - v0) x (v2 - v0)`.
+    pub ng: [f32; 3],
+}
+
+/// Any-hit filter: called for a candidate hit of its geometry (one the ray meets, in its mask and not
+/// culled); returns false to ignore the candidate. Candidates come in any order, a triangle's possibly
+/// more than once; called on the querying thread, from every thread that queries.
+pub type rq_filter_fn = Option<
+    unsafe extern "C" fn(
+        user: *mut c_void,
+        ray: *const rq_ray_ex,
+        candidate: *const rq_hit_ex,
+    ) -> bool,
+>;
+
+/// One geometry of a scene. Fill with `rq_geometry_desc_init`, then set the mesh and what you need.
+/// The library reads only the fields `struct_size` covers.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct rq_geometry_desc {
+    /// `sizeof(rq_geometry_desc)` as the caller knows it (the same for every element of an array).
+    pub struct_size: u32,
+    /// The triangles (copied at build).
+    pub mesh: rq_mesh_desc,
+    /// Seen by rays with `(ray.mask & mask) != 0`; default `0xFFFFFFFF`.
+    pub mask: u32,
+    /// `rq_geometry_flags`; default 0.
+    pub flags: u32,
+    /// NULL (default): every candidate counts.
+    pub filter: rq_filter_fn,
+    /// Passed to `filter`.
+    pub filter_user: *mut c_void,
 }
 
 /// An immutable scene (opaque). Free with `rq_scene_free`.
