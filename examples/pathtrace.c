@@ -190,20 +190,7 @@ static vec3 normalize(vec3 a) {
 static vec3 ray_ex_org(const rq_ray_ex *r) { return v3(r->org[0], r->org[1], r->org[2]); }
 static vec3 ray_ex_dir(const rq_ray_ex *r) { return v3(r->dir[0], r->dir[1], r->dir[2]); }
 
-/* A ray that sees every geometry and both faces. */
-static void set_ray(rq_ray_ex *r, vec3 org, vec3 dir, float tmin) {
-  r->org[0] = org.x;
-  r->org[1] = org.y;
-  r->org[2] = org.z;
-  r->tmin = tmin;
-  r->dir[0] = dir.x;
-  r->dir[1] = dir.y;
-  r->dir[2] = dir.z;
-  r->tmax = INFINITY;
-  r->mask = 0xFFFFFFFFu;
-  r->flags = 0;
-}
-
+/* A plain ray (the shadow rays). */
 static void set_shadow_ray(rq_ray *r, vec3 org, vec3 dir, float tmin) {
   r->org[0] = org.x;
   r->org[1] = org.y;
@@ -213,6 +200,18 @@ static void set_shadow_ray(rq_ray *r, vec3 org, vec3 dir, float tmin) {
   r->dir[1] = dir.y;
   r->dir[2] = dir.z;
   r->tmax = INFINITY;
+}
+
+/* A ray that sees every geometry and both faces. */
+static void set_ray(rq_ray_ex *r, vec3 org, vec3 dir, float tmin) {
+  rq_ray plain;
+  set_shadow_ray(&plain, org, dir, tmin);
+  memcpy(r->org, plain.org, sizeof r->org);
+  memcpy(r->dir, plain.dir, sizeof r->dir);
+  r->tmin = plain.tmin;
+  r->tmax = plain.tmax;
+  r->mask = 0xFFFFFFFFu;
+  r->flags = 0;
 }
 
 /* The hit's unit geometric normal (rq_hit_ex.ng), turned to face against `dir` (two-sided surfaces:

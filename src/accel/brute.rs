@@ -1,6 +1,6 @@
 //! The reference structure: every triangle, in id order, through the shared test.
 
-use crate::accel::{run_query, Aabb, AcceptingQuery, RayQuery};
+use crate::accel::{counted_hit, run_query, Aabb, AcceptingQuery, RayQuery};
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
 use crate::triangle::{Accept, TriangleLoop, TriangleTest};
@@ -51,16 +51,7 @@ pub(crate) fn test_all<T: TriangleTest, const ANY: bool>(test: &T, mesh: &TriMes
                 continue;
             }
             let prim = (base + k) as u32;
-            if let Some(hit) = test.test(tri) {
-                if !test.accept(prim, &hit) {
-                    continue;
-                }
-                let h = Hit {
-                    t: hit.t,
-                    u: hit.u,
-                    v: hit.v,
-                    prim,
-                };
+            if let Some(h) = counted_hit(test, prim, tri) {
                 if h.beats(&best) {
                     best = h;
                     if ANY {

@@ -1,5 +1,7 @@
 //! Acceleration structures and the one query surface they share.
 
+use glam::Vec3;
+
 use crate::mesh::TriMesh;
 pub use crate::ray::Aabb;
 use crate::ray::{Hit, Ray};
@@ -148,16 +150,7 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
             if MAILBOX && mailbox.seen(prim) {
                 continue;
             }
-            if let Some(hit) = test.test(&block.get(lane)) {
-                if !test.accept(prim, &hit) {
-                    continue;
-                }
-                let h = Hit {
-                    t: hit.t,
-                    u: hit.u,
-                    v: hit.v,
-                    prim,
-                };
+            if let Some(h) = counted_hit(test, prim, &block.get(lane)) {
                 if ANY {
                     return Some(h);
                 }
@@ -169,6 +162,18 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
         base += 4;
     }
     None
+}
+
+/// The hit of triangle `prim` (corners `tri`) if the ray hits it and the query counts the hit.
+#[inline(always)]
+pub(crate) fn counted_hit<T: TriangleTest>(test: &T, prim: u32, tri: &[Vec3; 3]) -> Option<Hit> {
+    let hit = test.test(tri)?;
+    test.accept(prim, &hit).then_some(Hit {
+        t: hit.t,
+        u: hit.u,
+        v: hit.v,
+        prim,
+    })
 }
 
 /// The triangles of `ids[base..base + 4]` named by `lanes`, from the mesh (the indexed layout).

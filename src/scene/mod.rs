@@ -550,25 +550,26 @@ impl Scene {
     }
 
     fn intersect_accepted(&self, ray: &RayEx) -> Hit {
-        let conditions = Conditions {
-            mesh: &self.mesh,
-            geometries: &self.geometries,
-            ray,
-        };
-        self.accel
-            .accepting()
-            .intersect_accepting(&self.mesh, &ray.ray, Some(&conditions))
+        self.accel.accepting().intersect_accepting(
+            &self.mesh,
+            &ray.ray,
+            Some(&self.conditions(ray)),
+        )
     }
 
     fn occluded_accepted(&self, ray: &RayEx) -> bool {
-        let conditions = Conditions {
+        self.accel
+            .accepting()
+            .occluded_accepting(&self.mesh, &ray.ray, Some(&self.conditions(ray)))
+    }
+
+    /// What `ray` and the geometries ask of a hit.
+    fn conditions<'a>(&'a self, ray: &'a RayEx) -> Conditions<'a> {
+        Conditions {
             mesh: &self.mesh,
             geometries: &self.geometries,
             ray,
-        };
-        self.accel
-            .accepting()
-            .occluded_accepting(&self.mesh, &ray.ray, Some(&conditions))
+        }
     }
 
     /// The validated mesh.
