@@ -147,6 +147,7 @@ fn scene_set(quick: bool) -> Vec<SceneSpec> {
             ("tetra", 10_000),
             ("soup", 10_000),
             ("slivers", 2_000),
+            ("hair", 50_000),
         ]
     };
     for &(name, n) in procedural {
