@@ -6,7 +6,7 @@
 use alloc::vec::Vec;
 
 use super::layout::Shape;
-use super::voxel::Cells;
+use super::voxel::{Cells, Overlap};
 use super::{GridParams, Lists};
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
@@ -76,6 +76,7 @@ impl Kept {
 
 /// Finds each live triangle's cells once, counts them in `counts` (one slot per cell) and keeps
 /// them for the fill.
+#[inline(never)]
 fn keep_cells(
     mesh: &TriMesh,
     cells: &Cells,
@@ -95,40 +96,66 @@ fn keep_cells(
         }
     };
     let mut failed = None;
-    let mut overflow = false;
     let degenerate = mesh.degenerate_bits();
-    for (chunk, (tris, &flags)) in tris.chunks(32).zip(degenerate).enumerate() {
-        for (k, tri) in tris.iter().enumerate() {
-            if flags & (1 << k) != 0 {
-                continue;
-            }
-            let before = kept.len();
-            cells.for_each(tri, exact, &mut |cell| {
-                debug_assert!((cell as usize) < counts.len());
-                // SAFETY: `Cells::for_each` emits cells of the grid (each coordinate clamped to
-                // `res − 1`), and `counts` has one slot per cell and one more.
-                let n = unsafe { counts.get_unchecked_mut(cell as usize) };
-                *n = n.wrapping_add(1);
-                overflow |= *n == 0;
-                if kept.len() < kept.capacity() {
-                    kept.push(cell);
-                } else if failed.is_none() {
-                    if let Err(e) = budget.push(&mut kept, cell, "grid build scratch") {
+    for (prim, (tri, count)) in tris.iter().zip(per_triangle.iter_mut()).enumerate() {
+        if degenerate
+            .get(prim / 32)
+            .map_or(true, |w| w & (1 << (prim % 32)) != 0)
+        {
+            continue;
+        }
+        let before = kept.len();
+        // Counts `cell` (a cell of the grid: each coordinate is clamped to `res − 1` by
+        // `Cells`, and `counts` has one slot per cell and one more). A count cannot wrap: it
+        // would need 2^32 references, which the total check below refuses.
+        let mut count_cell = |cell: usize| {
+            debug_assert!(cell < counts.len());
+            // SAFETY: above.
+            let n = unsafe { counts.get_unchecked_mut(cell) };
+            *n = n.wrapping_add(1);
+        };
+        match cells.classify(tri, exact) {
+            Overlap::Small { base, mut mask } => {
+                // At most eight cells: make room first, so that the pushes never grow.
+                if kept.capacity() - kept.len() < 8 {
+                    if let Err(e) = grow(&mut kept, budget) {
                         failed = Some(e);
+                        break;
                     }
                 }
-            });
-            if let Some(e) = failed {
-                budget.free(kept);
-                budget.free(per_triangle);
-                return Err(e);
+                while mask != 0 {
+                    let bit = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    let cell = base + cells.corner[bit & 7];
+                    count_cell(cell);
+                    kept.push(cell as u32);
+                }
             }
-            if let Some(slot) = per_triangle.get_mut(chunk * 32 + k) {
-                *slot = (kept.len() - before) as u32;
+            Overlap::Large(fp) => {
+                cells.for_each_large(tri, &fp, exact, &mut |cell| {
+                    count_cell(cell as usize);
+                    if kept.len() == kept.capacity() && failed.is_none() {
+                        if let Err(e) = grow(&mut kept, budget) {
+                            failed = Some(e);
+                        }
+                    }
+                    if kept.len() < kept.capacity() {
+                        kept.push(cell);
+                    }
+                });
+                if failed.is_some() {
+                    break;
+                }
             }
         }
+        *count = (kept.len() - before) as u32;
     }
-    if overflow || kept.len() > u32::MAX as usize {
+    if let Some(e) = failed {
+        budget.free(kept);
+        budget.free(per_triangle);
+        return Err(e);
+    }
+    if kept.len() > u32::MAX as usize {
         budget.free(kept);
         budget.free(per_triangle);
         return Err(BuildError::CapacityExceeded {
@@ -141,16 +168,33 @@ fn keep_cells(
     })
 }
 
+/// Doubles the room of `kept`, charged to `budget`.
+#[cold]
+#[inline(never)]
+fn grow(kept: &mut Vec<u32>, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+    let len = kept.len();
+    // `budget.push` grows by doubling when the vector is full; fill it to the brim first.
+    while kept.len() < kept.capacity() {
+        kept.push(0);
+    }
+    let r = budget.push(kept, 0, "grid build scratch");
+    kept.truncate(len);
+    r
+}
+
 /// Turns the per-cell counts into the ends of the cell lists, each list starting on a multiple of
-/// `align` (so an empty cell's list is empty, not the gap before the next), and
+/// `align` (1 or 4; so an empty cell's list is empty, not the gap before the next), and
 /// `counts[cells]` into the aligned total, which it returns.
+#[inline(never)]
 fn offsets(counts: &mut [u32], cells: usize, align: u64) -> Result<usize, BuildError> {
+    debug_assert!(align.is_power_of_two());
+    let round = |t: u64| (t + align - 1) & !(align - 1);
     let mut total: u64 = 0;
     for n in counts.iter_mut().take(cells) {
-        total = total.div_ceil(align) * align + u64::from(*n);
+        total = round(total) + u64::from(*n);
         *n = total as u32;
     }
-    let total = total.div_ceil(align) * align;
+    let total = round(total);
     if total > u64::from(u32::MAX) {
         return Err(BuildError::CapacityExceeded {
             what: "grid references",
@@ -192,6 +236,7 @@ fn fill(
 
 /// The packed lists: ids four to a block beside a copy of their triangles; the gap lanes at the
 /// end of each list hold `Hit::INVALID_ID` and NaN.
+#[inline(never)]
 fn fill_packed(
     mesh: &TriMesh,
     kept: &Kept,

@@ -239,21 +239,17 @@ impl UniformGrid {
         (lo as usize, hi as usize)
     }
 
-    /// Tests cell `index`'s triangles (see [`UniformGrid::span`] for `index`), keeping the best hit
-    /// in `best`; with `ANY`, returns the first hit.
+    /// Tests the triangles of a cell's list `(first, end)` (from [`UniformGrid::span`], not empty),
+    /// keeping the best hit in `best`; with `ANY`, returns the first hit.
     #[inline(always)]
-    fn test_cell<T: TriangleTest, const ANY: bool>(
+    fn test_span<T: TriangleTest, const ANY: bool>(
         &self,
         test: &T,
         mesh: &TriMesh,
-        index: usize,
+        (first, end): (usize, usize),
         best: &mut Hit,
         mailbox: &mut Mailbox,
     ) -> Option<Hit> {
-        let (first, end) = self.span(index);
-        if first == end {
-            return None;
-        }
         match &self.lists {
             Lists::Packed { ids, tris } => {
                 debug_assert!(first <= end && end <= tris.len() && tris.len() == ids.len());

@@ -54,8 +54,9 @@ fn sat_overlaps(tri: &[Vec3; 3], lo: [f64; 3], hi: [f64; 3]) -> bool {
 
 /// The voxelization lists a triangle in every cell whose box enlarged by the margin it meets (by
 /// the separating-axis oracle), and in no cell it misses by more than the rounding slack (1/512 of
-/// a cell): slivers across the box (plain, tiny, far from the origin), hair, a soup, the stadium,
-/// sheets on cell planes and big triangles, on grids of several densities. It also checks that
+/// a cell): needles (nearly collinear, so computed normals are inexact), slivers across the box
+/// (plain, tiny, far from the origin), hair, a soup, the stadium, sheets on cell planes and big
+/// triangles, on grids of several densities. It also checks that
 /// the work stays near the cells kept: this is what makes long triangles cheap.
 #[test]
 fn voxelization_lists_exactly_the_overlapped_cells() {
@@ -65,7 +66,21 @@ fn voxelization_lists_exactly_the_overlapped_cells() {
         sheets.push_quad([[x, 0.0, 0.0], [x, 1.0, 0.3], [0.2, x, 1.0], [1.0, 1.0, x]]);
         sheets.push_quad([[x, 0.0, 0.0], [x, 1.0, 0.0], [x, 0.0, 1.0], [x, 1.0, 1.0]]);
     }
+    // Needles: nearly collinear triangles (the third vertex off the edge by ~1e-6 of its
+    // length), whose computed normals are far from exact, short and long, at all angles.
+    let mut needles = MeshData::default();
+    let mut rng = crate::workload::SplitMix64::new(0x5eed);
+    for k in 0..1500 {
+        let a = rng.next_vec3();
+        let len = if k % 3 == 0 { 0.5 } else { 0.05 };
+        let b = a + (rng.next_vec3() - Vec3::splat(0.5)) * len;
+        let c = a.lerp(b, rng.next_f32()) + (rng.next_vec3() - Vec3::splat(0.5)) * (1e-6 * len);
+        let base = needles.vertices.len() as u32;
+        needles.vertices.extend([a, b, c].map(|v| v.to_array()));
+        needles.indices.push([base, base + 1, base + 2]);
+    }
     let scenes = [
+        needles,
         procedural::random_slivers(1500, 5),
         procedural::random_slivers(300, 6).transformed(1e-6, [0.0; 3]),
         procedural::random_slivers(300, 7).transformed(1.0, [1e7, -1e7, 3e6]),

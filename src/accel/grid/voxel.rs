@@ -17,7 +17,7 @@
 //! 2^-40 of the coordinates and of the row's constraint width (docs/design.md bounds it), so no
 //! cell the exact test would accept is dropped.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A, Vec4};
 
 use super::layout::Shape;
 
@@ -32,12 +32,14 @@ pub(super) struct Cells {
     res: [u32; 3],
     /// The flat index's step per axis.
     stride: [usize; 3],
-    min32: Vec3,
+    /// The flat index's offset of the cell `i, j, k` (bit `i + 2j + 4k`) from a footprint's corner.
+    pub corner: [usize; 8],
+    min32: Vec3A,
     /// `res / (max − min)` in f32.
-    inv32: Vec3,
+    inv32: Vec3A,
     /// The margin plus a bound on the f32 footprint's rounding, in world units (see
     /// [`Cells::new`]).
-    pad32: Vec3,
+    pad32: Vec3A,
     min: [f64; 3],
     /// 1 / cell size.
     inv: [f64; 3],
@@ -58,6 +60,15 @@ impl Footprint {
     pub fn len(&self, axis: usize) -> u32 {
         self.hi[axis] - self.lo[axis] + 1
     }
+}
+
+/// A triangle's cells, as [`Cells::classify`] finds them.
+pub(super) enum Overlap {
+    /// The cells `base + corner[bit]` for the bits of `mask` (bit `i + 2j + 4k` is the cell `i, j,
+    /// k` up from the footprint's corner `base`).
+    Small { base: usize, mask: u32 },
+    /// A footprint of more than two cells on some axis.
+    Large(Footprint),
 }
 
 impl Cells {
@@ -93,16 +104,20 @@ impl Cells {
             shape.res[1] as f32,
             shape.res[2] as f32,
         );
+        let stride = [
+            1,
+            shape.res[0] as usize,
+            shape.res[0] as usize * shape.res[1] as usize,
+        ];
         Cells {
             res: shape.res,
-            stride: [
-                1,
-                shape.res[0] as usize,
-                shape.res[0] as usize * shape.res[1] as usize,
-            ],
-            min32: shape.bounds.min,
-            inv32: resf / (shape.bounds.max - shape.bounds.min),
-            pad32: Vec3::from(pad),
+            stride,
+            corner: core::array::from_fn(|b| {
+                (b & 1) * stride[0] + ((b >> 1) & 1) * stride[1] + (b >> 2) * stride[2]
+            }),
+            min32: shape.bounds.min.into(),
+            inv32: (resf / (shape.bounds.max - shape.bounds.min)).into(),
+            pad32: Vec3::from(pad).into(),
             min: f(shape.bounds.min),
             inv,
             half: [0, 1, 2].map(|a| (0.5 + margin[a] * inv[a]) * ROUNDING_SLACK),
@@ -127,32 +142,26 @@ impl Cells {
     /// grid), in f32 (see [`Cells::new`] for why it misses none).
     #[inline(always)]
     pub fn footprint(&self, tri: &[Vec3; 3]) -> Footprint {
-        // Coordinates are finite: plain comparisons give min and max.
-        let lt = |a: f32, b: f32| if a < b { a } else { b };
-        let gt = |a: f32, b: f32| if a > b { a } else { b };
-        let [p, q, r] = tri;
-        let lo = Vec3::new(
-            lt(lt(p.x, q.x), r.x),
-            lt(lt(p.y, q.y), r.y),
-            lt(lt(p.z, q.z), r.z),
-        );
-        let hi = Vec3::new(
-            gt(gt(p.x, q.x), r.x),
-            gt(gt(p.y, q.y), r.y),
-            gt(gt(p.z, q.z), r.z),
-        );
+        // Four lanes at a time (the fourth unused); coordinates are finite, so `min`/`max` need
+        // no NaN handling.
+        let [p, q, r] = tri.map(Vec3A::from);
+        let lo = p.min(q).min(r);
+        let hi = p.max(q).max(r);
         let l = (lo - self.pad32 - self.min32) * self.inv32;
         let h = (hi + self.pad32 - self.min32) * self.inv32;
-        // The cell of a value is its floor clamped to the grid: clamp to [0, 2^31] first (`max`
-        // and `min` ignore NaN, which becomes 0), truncate (floor, for a non-negative value), then
-        // clamp to the last cell.
-        // Not `clamp`, which keeps NaN.
-        #[allow(clippy::manual_clamp)]
+        // The cell of a value is its floor clamped to the grid: clamp to [0, 2^30] first (NaN
+        // fails `f > 0` and becomes 0), truncate (floor, for a non-negative value), then clamp to
+        // the last cell.
         let cell = |f: f32, a: usize| {
-            let f = f.max(0.0).min(2_147_483_648.0);
-            debug_assert!((0.0..=2_147_483_648.0).contains(&f));
-            // SAFETY: `f` is in [0, 2^31], so it is not NaN and its truncation fits a u32.
-            unsafe { f.to_int_unchecked::<u32>() }.min(self.res[a] - 1)
+            let f = if f > 0.0 { f } else { 0.0 };
+            let f = if f < 1_073_741_824.0 {
+                f
+            } else {
+                1_073_741_824.0
+            };
+            debug_assert!((0.0..=1_073_741_824.0).contains(&f));
+            // SAFETY: `f` is in [0, 2^30], so it is not NaN and its truncation fits an i32.
+            (unsafe { f.to_int_unchecked::<i32>() } as u32).min(self.res[a] - 1)
         };
         Footprint {
             lo: [cell(l.x, 0), cell(l.y, 1), cell(l.z, 2)],
@@ -162,47 +171,85 @@ impl Cells {
 
     /// Calls `emit(cell)` for every cell the triangle overlaps: every cell whose box, enlarged by
     /// the margin, meets it (and perhaps a few that only come within the rounding slack of it).
-    /// With `exact == false`, every cell of its footprint.
-    #[inline(always)]
+    /// With `exact == false`, every cell of its footprint. (The build inlines the same with its
+    /// own emission, build.rs.)
+    #[cfg(test)]
     pub fn for_each(&self, tri: &[Vec3; 3], exact: bool, emit: &mut impl FnMut(u32)) {
-        let fp = self.footprint(tri);
-        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
-        let spans = thick.iter().filter(|&&t| t).count();
-        if !exact || spans < 2 {
-            // At most one axis more than a cell thick: a single cell, or a column that the
-            // (connected) triangle crosses from end to end while lying within the column's
-            // enlarged cross-section, so it meets every cell of it.
-            self.for_box(&fp, emit);
-            return;
-        }
-        if (0..3).all(|a| fp.hi[a] - fp.lo[a] <= 1) {
-            // Bit i + 2j + 4k: the cell i, j, k up from the footprint's corner.
-            let mut mask = self.small(tri, &fp, thick);
-            let base = self.index(fp.lo);
-            while mask != 0 {
-                let bit = mask.trailing_zeros() as usize;
-                mask &= mask - 1;
-                let cell = base
-                    + (bit & 1) * self.stride[0]
-                    + ((bit >> 1) & 1) * self.stride[1]
-                    + (bit >> 2) * self.stride[2];
-                emit(cell as u32);
+        match self.classify(tri, exact) {
+            Overlap::Small { base, mut mask } => {
+                while mask != 0 {
+                    let bit = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    emit((base + self.corner[bit & 7]) as u32);
+                }
             }
-        } else {
-            let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
-            self.overlapped(&q, &fp, thick, emit);
+            Overlap::Large(fp) => self.for_each_large(tri, &fp, exact, emit),
         }
     }
 
-    /// [`Cells::for_each`] for a footprint of at most two cells per axis (nearly every triangle of
-    /// a well-shaped scene), two on two or three axes: the cells it overlaps as bits `i + 2j + 4k`
-    /// (the cell `i, j, k` up from the footprint's corner), by the separating axes cell by cell —
-    /// each projection's edges as a mask of its 2×2 cells, and the plane.
+    /// The cells of a triangle as a mask when its footprint has at most two cells per axis
+    /// (nearly every triangle of a well-shaped scene), else the footprint for
+    /// [`Cells::for_each_large`].
+    #[inline(always)]
+    pub fn classify(&self, tri: &[Vec3; 3], exact: bool) -> Overlap {
+        let fp = self.footprint(tri);
+        let n = [0, 1, 2].map(|a| fp.hi[a] - fp.lo[a]);
+        if (n[0] | n[1] | n[2]) > 1 {
+            return Overlap::Large(fp);
+        }
+        // The footprint as bits i + 2j + 4k (the cell i, j, k up from its corner). A single cell
+        // or a column needs no test: the (connected) triangle crosses a column from end to end
+        // while lying within its enlarged cross-section, so it meets every cell of it.
+        let mut mask = 1u32;
+        mask |= (mask << 1) * n[0];
+        mask |= (mask << 2) * n[1];
+        mask |= (mask << 4) * n[2];
+        if exact && n[0] + n[1] + n[2] >= 2 {
+            mask &= self.small(tri, &fp, n.map(|n| n > 0));
+        }
+        Overlap::Small {
+            base: self.index(fp.lo),
+            mask,
+        }
+    }
+
+    /// [`Cells::for_each`] for a footprint of more than two cells on some axis.
+    #[inline(never)]
+    pub fn for_each_large(
+        &self,
+        tri: &[Vec3; 3],
+        fp: &Footprint,
+        exact: bool,
+        emit: &mut impl FnMut(u32),
+    ) {
+        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
+        if !exact || thick.iter().filter(|&&t| t).count() < 2 {
+            self.for_box(fp, emit);
+        } else {
+            let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
+            self.overlapped(&q, fp, thick, emit);
+        }
+    }
+
+    /// The cells a triangle overlaps among those of a footprint of at most two cells per axis,
+    /// two on two or three axes (`thick`), as bits `i + 2j + 4k` (the cell `i, j, k` up from the
+    /// footprint's corner): the separating axes cell by cell, four cells at a time — each
+    /// projection's edges as a mask of its 2×2 cells, and the plane.
+    ///
+    /// In f32, in cell units from the footprint's corner (converted from f64 cell units, so the
+    /// values are below 2 + 2·margin): the few roundings of each test are below 2^-20 of its
+    /// width, well inside the rounding slack.
     #[inline(never)]
     fn small(&self, tri: &[Vec3; 3], fp: &Footprint, thick: [bool; 3]) -> u32 {
-        let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
-        let centre = [0, 1, 2].map(|a| f64::from(fp.lo[a]) + 0.5);
-        let quad = |x, y| self.quad(&q, &centre, x, y);
+        let q = tri.map(|p| [0, 1, 2].map(|a| (self.local(p[a], a) - f64::from(fp.lo[a])) as f32));
+        let half = self.half.map(|h| h as f32);
+        // The projection onto axes (x, y), its 2×2 mask spread to the cells at offset 0 on the
+        // third axis.
+        let quad = |x: usize, y: usize| {
+            let m = quad_mask(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
+            let (wx, wy) = (1 << x, 1 << y);
+            (m & 1) | ((m >> 1) & 1) << wx | ((m >> 2) & 1) << wy | ((m >> 3) & 1) << (wx + wy)
+        };
         match thick {
             // One cell thick on an axis: the projection onto the other two decides (for_each).
             [false, _, _] => quad(1, 2),
@@ -210,42 +257,10 @@ impl Cells {
             [_, _, false] => quad(0, 1),
             _ => {
                 let (xy, yz, zx) = (quad(0, 1), quad(1, 2), quad(2, 0));
-                let mut mask = (xy | xy << 4) & (yz | yz << 1) & (zx | zx << 2);
-                // The plane: |n·(c − q0)| ≤ Σ |n_k|·half_k at the eight centres.
-                let n = cross(sub(q[1], q[0]), sub(q[2], q[0]));
-                let reach = (0..3).fold(0.0, |s, k| s + n[k].abs() * self.half[k]);
-                let v0 = (0..3).fold(0.0, |s, k| s + n[k] * (centre[k] - q[0][k]));
-                let mut plane = 0;
-                for (bit, v) in [
-                    v0,
-                    v0 + n[0],
-                    v0 + n[1],
-                    v0 + n[0] + n[1],
-                    v0 + n[2],
-                    v0 + n[0] + n[2],
-                    v0 + n[1] + n[2],
-                    v0 + n[0] + n[1] + n[2],
-                ]
-                .into_iter()
-                .enumerate()
-                {
-                    // NaN (a normal lost to overflow) keeps the cell.
-                    plane |= u32::from(!(v.abs() > reach)) << bit;
-                }
-                mask &= plane;
-                mask
+                let mask = (xy | xy << 4) & (yz | yz << 1) & (zx | zx << 2);
+                mask & plane_mask(&q, half)
             }
         }
-    }
-
-    /// The 2×2 mask of the projection onto axes `(x, y)` at the footprint's corner cells
-    /// `centre`, spread to the bits `i + 2j + 4k` of [`Cells::small`] at offset 0 on the third axis.
-    #[inline(always)]
-    fn quad(&self, q: &[[f64; 3]; 3], centre: &[f64; 3], x: usize, y: usize) -> u32 {
-        let p = q.map(|v| [v[x], v[y]]);
-        let m = Projection::new(p, [self.half[x], self.half[y]]).mask4(centre[x], centre[y]);
-        let (wx, wy) = (1 << x, 1 << y);
-        (m & 1) | ((m >> 1) & 1) << wx | ((m >> 2) & 1) << wy | ((m >> 3) & 1) << (wx + wy)
     }
 
     /// Every cell of `fp`.
@@ -307,8 +322,13 @@ impl Cells {
         }
         let vw = Rows::new(q, w, v, &self.half);
         let wu = Rows::new(q, w, u, &self.half);
-        // The plane: |n·(c − q0)| ≤ Σ |n_k|·half_k, solved for c_w per column.
+        // The plane: n·(c − q0) within the vertices' projections onto the (computed, so not
+        // exact: all three are projected) normal, widened by Σ |n_k|·half_k; solved for c_w per
+        // column.
         let reach = (0..3).fold(0.0, |s, k| s + normal[k].abs() * self.half[k]);
+        let dot = |v: [f64; 3]| normal[0] * v[0] + normal[1] * v[1] + normal[2] * v[2];
+        let (d1, d2) = (dot(sub(q[1], q[0])), dot(sub(q[2], q[0])));
+        let (plane_lo, plane_hi) = (d1.min(d2).min(0.0) - reach, d1.max(d2).max(0.0) + reach);
         let inv_nw = 1.0 / normal[w];
         for j in fp.lo[v]..=fp.hi[v] {
             let cv = f64::from(j) + 0.5;
@@ -327,8 +347,8 @@ impl Cells {
                 let rest = normal[u] * (cu - q[0][u]) + off_v;
                 // n_w ≠ 0 unless the normal vanished in rounding (then the plane says nothing).
                 if inv_nw.is_finite() {
-                    let t1 = q[0][w] + (-reach - rest) * inv_nw;
-                    let t2 = q[0][w] + (reach - rest) * inv_nw;
+                    let t1 = q[0][w] + (plane_lo - rest) * inv_nw;
+                    let t2 = q[0][w] + (plane_hi - rest) * inv_nw;
                     let (l, h) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
                     if l > lo {
                         lo = l;
@@ -347,6 +367,58 @@ impl Cells {
             }
         }
     }
+}
+
+/// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
+const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
+const QUAD_Y: Vec4 = Vec4::new(0.5, 0.5, 1.5, 1.5);
+
+/// Which of the 2×2 cells centred at `(0.5 + i, 0.5 + j)`, `i, j ∈ {0, 1}`, of half extent
+/// `half` the projected triangle `p` may meet (bit `i + 2j`): each edge's normal separates the
+/// cells whose projection onto it misses the triangle's (the edge's vertices at 0, the opposite
+/// one at `far`, relative to the edge's first vertex). A NaN keeps the cell.
+#[inline(always)]
+fn quad_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
+    let mut mask = 0b1111;
+    for i in 0..3 {
+        let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+        let (a, b) = (e[1] - s[1], s[0] - e[0]);
+        let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
+        let r = a.abs() * half[0] + b.abs() * half[1];
+        let (lo, hi) = (far.min(0.0) - r, far.max(0.0) + r);
+        let v = Vec4::splat(a) * (QUAD_X - Vec4::splat(s[0]))
+            + Vec4::splat(b) * (QUAD_Y - Vec4::splat(s[1]));
+        mask &= (!(v.cmplt(Vec4::splat(lo)) | v.cmpgt(Vec4::splat(hi)))).bitmask();
+    }
+    mask
+}
+
+/// Which of the 2×2×2 cells centred at `(0.5 + i, 0.5 + j, 0.5 + k)` of half extent `half` the
+/// triangle's plane may cross (bit `i + 2j + 4k`): the normal `n`, computed, need not be exact —
+/// any axis separates when the projections miss — so all three vertices are projected onto it
+/// (`0`, `d1`, `d2` relative to `q0`). A NaN keeps the cell.
+#[inline(always)]
+fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
+    let d = |i: usize| [0, 1, 2].map(|a| q[i][a] - q[0][a]);
+    let (e1, e2) = (d(1), d(2));
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    let dot = |v: [f32; 3]| n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    let (d1, d2) = (dot(e1), dot(e2));
+    let r = n[0].abs() * half[0] + n[1].abs() * half[1] + n[2].abs() * half[2];
+    let lo = Vec4::splat(d1.min(d2).min(0.0) - r);
+    let hi = Vec4::splat(d1.max(d2).max(0.0) + r);
+    let v = Vec4::splat(n[0]) * (QUAD_X - Vec4::splat(q[0][0]))
+        + Vec4::splat(n[1]) * (QUAD_Y - Vec4::splat(q[0][1]));
+    let mut mask = 0;
+    for (k, cz) in [0.5f32, 1.5].into_iter().enumerate() {
+        let w = v + Vec4::splat(n[2] * (cz - q[0][2]));
+        mask |= (!(w.cmplt(lo) | w.cmpgt(hi))).bitmask() << (4 * k);
+    }
+    mask
 }
 
 /// The cells `k` whose centres `k + 0.5` lie in `[lo, hi]`, for bounds that start inside a
@@ -402,23 +474,6 @@ impl Projection {
             out.hi[i] = k + far.max(0.0) + r;
         }
         out
-    }
-
-    /// Which of the 2×2 cells centred at `(x0 + i, y0 + j)`, `i, j ∈ {0, 1}`, the constraints
-    /// allow: bit `i + 2j`.
-    #[inline(always)]
-    fn mask4(&self, x0: f64, y0: f64) -> u32 {
-        let mut mask = 0b1111;
-        for e in 0..3 {
-            let (a, b, lo, hi) = (self.a[e], self.b[e], self.lo[e], self.hi[e]);
-            let v = a * x0 + b * y0;
-            let mut edge = 0;
-            for (bit, v) in [v, v + a, v + b, v + a + b].into_iter().enumerate() {
-                edge |= u32::from((v >= lo) & (v <= hi)) << bit;
-            }
-            mask &= edge;
-        }
-        mask
     }
 }
 

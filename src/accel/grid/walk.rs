@@ -122,9 +122,11 @@ impl Line {
 }
 
 /// The DDA's state per axis (a fourth, unused slot lets an index `& 3` go unchecked). A moving axis
-/// crosses the plane `lo + k·size` next, at `t_next = (lo + k·size − org)·inv`, computed from
-/// the plane's position each time (no accumulated error, docs/design.md), and may cross planes
-/// until `k` reaches `k_end` (the box's face); a non-moving axis has `t_next = ∞` and `k = k_end`.
+/// crosses the plane `lo + k·size` next, at `t_next = (lo + k·size − org)·inv`: computed from the
+/// plane's position each time, so no error accumulates (docs/design.md bounds it), and never NaN
+/// (a finite difference times a finite inverse; `lo − org` times `inv` and `size·inv` apart could
+/// each overflow, and their sum be ∞ − ∞). It may cross planes until `k` reaches `k_end` (the
+/// box's face); a non-moving axis has `t_next = ∞` and `k = k_end`.
 struct Axes {
     t_next: [f32; 4],
     /// The next plane's index, an integer below 2^24 held as f32 (exact).
@@ -137,6 +139,14 @@ struct Axes {
     size: [f32; 4],
     org: [f32; 4],
     inv: [f32; 4],
+}
+
+impl Axes {
+    /// The t of the plane `k` on `axis`.
+    #[inline(always)]
+    fn plane_t(&self, axis: usize, k: f32) -> f32 {
+        (self.lo[axis] + k * self.size[axis] - self.org[axis]) * self.inv[axis]
+    }
 }
 
 impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
@@ -182,27 +192,31 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             index += cell as usize * stride;
             let inv = line.inv[a];
             let up = line.dir[a] > 0.0;
-            axes.lo[a] = shape.bounds.min[a];
-            axes.size[a] = shape.cell_size[a];
-            axes.org[a] = line.org[a];
-            axes.inv[a] = inv;
             if inv.is_finite() {
                 let k = cell + u32::from(up);
                 axes.k[a] = k as f32;
                 axes.k_end[a] = if up { res as f32 } else { 0.0 };
                 axes.step[a] = if up { 1.0 } else { -1.0 };
                 axes.delta[a] = if up { stride } else { stride.wrapping_neg() };
-                axes.t_next[a] =
-                    (axes.lo[a] + axes.k[a] * axes.size[a] - axes.org[a]) * axes.inv[a];
-            } else {
-                axes.k[a] = 0.0;
-                axes.k_end[a] = 0.0;
+                axes.lo[a] = shape.bounds.min[a];
+                axes.size[a] = shape.cell_size[a];
+                axes.org[a] = line.org[a];
+                axes.inv[a] = inv;
+                axes.t_next[a] = axes.plane_t(a, axes.k[a]);
             }
             stride *= res as usize;
         }
-        let t1 = line.t1;
-        // The best hit's t once the early exit may use it (∞ until then, and always without it).
-        let mut t_hit = f32::INFINITY;
+        // The walk ends at the first cell whose exit `t_axis` reaches `t_stop`: past the window
+        // (`t_axis > t1`, i.e. `t_axis ≥ next_up(t1)`), or, with the early exit, at or past the
+        // best hit (a triangle not yet tested lies beyond the current cell by the insertion margin,
+        // so a hit before the cell's exit cannot be beaten). `no_exit` keeps `t_stop` at the
+        // window's end when the early exit is off (`max(best.t, ∞) = ∞`).
+        let mut t_stop = next_up(line.t1);
+        let no_exit = if line.early_exit {
+            f32::NEG_INFINITY
+        } else {
+            f32::INFINITY
+        };
         loop {
             // The axis whose boundary comes first (ties to the lower axis), without branches. A
             // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
@@ -214,16 +228,16 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 work.cells += 1;
                 work.tests += grid.listed(index);
             }
-            if let Some(h) = grid.test_cell::<T, ANY>(&test, mesh, index, &mut best, &mut mailbox) {
-                return h;
+            let span = grid.span(index);
+            if span.0 != span.1 {
+                if let Some(h) =
+                    grid.test_span::<T, ANY>(&test, mesh, span, &mut best, &mut mailbox)
+                {
+                    return h;
+                }
+                t_stop = t_stop.min(best.t.max(no_exit));
             }
-            if line.early_exit {
-                t_hit = best.t;
-            }
-            // A triangle not yet tested lies beyond this cell by the insertion margin, so a hit
-            // before the cell's exit cannot be beaten (`best.t <= min(t_axis, t1)`, written so as
-            // to share the window's test: best.t ≤ t1 or the window ends here anyway).
-            if (t_axis >= t_hit) | (t_axis > t1) {
+            if t_axis >= t_stop {
                 return best;
             }
             if axes.k[axis] == axes.k_end[axis] {
@@ -234,9 +248,21 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             index = index.wrapping_add(axes.delta[axis]);
             let k = axes.k[axis] + axes.step[axis];
             axes.k[axis] = k;
-            axes.t_next[axis] =
-                (axes.lo[axis] + k * axes.size[axis] - axes.org[axis]) * axes.inv[axis];
+            axes.t_next[axis] = axes.plane_t(axis, k);
         }
+    }
+}
+
+/// The smallest f32 above `x` (`x` itself for NaN and +∞).
+fn next_up(x: f32) -> f32 {
+    if x.is_nan() || x == f32::INFINITY {
+        x
+    } else if x == 0.0 {
+        f32::from_bits(1)
+    } else if x > 0.0 {
+        f32::from_bits(x.to_bits() + 1)
+    } else {
+        f32::from_bits(x.to_bits() - 1)
     }
 }
 
