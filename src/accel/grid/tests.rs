@@ -89,7 +89,16 @@ fn voxelization_lists_exactly_the_overlapped_cells() {
         procedural::teapot_in_stadium(200, 400),
         sheets,
     ];
-    let params = [GridParams::DEFAULT, GridParams::FINE, GridParams::COARSE];
+    let dense = GridParams {
+        density: 8.0,
+        ..GridParams::DEFAULT
+    };
+    let params = [
+        GridParams::DEFAULT,
+        GridParams::FINE,
+        GridParams::COARSE,
+        dense,
+    ];
     let mut long = 0usize;
     for (s, data) in scenes.iter().enumerate() {
         for p in &params {
