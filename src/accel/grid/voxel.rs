@@ -477,36 +477,67 @@ impl Projection {
     }
 }
 
-/// A [`Projection`] solved row by row.
+/// A [`Projection`] solved row by row: per edge, `x ≥ (lower − b·y)·inv` and `x ≤ (upper −
+/// b·y)·inv` (the projection's bounds, swapped for a negative `a`, `inv = 1/a`); an edge with
+/// `a = 0` constrains `y` alone (`lo ≤ b·y ≤ hi`).
 struct Rows {
+    b: [f64; 3],
+    lower: [f64; 3],
+    upper: [f64; 3],
+    inv: [f64; 3],
+    /// Whether some edge has `a = 0` (then `solve` checks `y` against it).
+    flat: bool,
     p: Projection,
-    inv_a: [f64; 3],
 }
 
 impl Rows {
     #[inline(always)]
     fn new(q: &[[f64; 3]; 3], x: usize, y: usize, half: &[f64; 3]) -> Rows {
         let p = Projection::new(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
-        let inv_a = p.a.map(|a| 1.0 / a);
-        Rows { p, inv_a }
+        let mut r = Rows {
+            b: p.b,
+            lower: [f64::NEG_INFINITY; 3],
+            upper: [f64::INFINITY; 3],
+            inv: [0.0; 3],
+            flat: false,
+            p,
+        };
+        for i in 0..3 {
+            let a = r.p.a[i];
+            if a == 0.0 {
+                // No bound on x from this edge (−∞ − b·y stays −∞: `inv = 1` keeps it so).
+                r.flat = true;
+                r.b[i] = 0.0;
+                r.inv[i] = 1.0;
+            } else {
+                r.inv[i] = 1.0 / a;
+                (r.lower[i], r.upper[i]) = if a > 0.0 {
+                    (r.p.lo[i], r.p.hi[i])
+                } else {
+                    (r.p.hi[i], r.p.lo[i])
+                };
+            }
+        }
+        r
     }
 
     /// The centres `x` allowed at `y`, narrowing `(lo, hi)`; `lo > hi` when none is. A NaN bound
     /// (0·∞ for a vanishing `a`) never narrows.
     #[inline(always)]
     fn solve(&self, y: f64, (mut lo, mut hi): (f64, f64)) -> (f64, f64) {
-        let p = &self.p;
-        for i in 0..3 {
-            let by = p.b[i] * y;
-            if p.a[i] == 0.0 {
-                if !(by >= p.lo[i] && by <= p.hi[i]) {
+        if self.flat {
+            let p = &self.p;
+            for i in 0..3 {
+                let by = p.b[i] * y;
+                if p.a[i] == 0.0 && !(by >= p.lo[i] && by <= p.hi[i]) {
                     return (1.0, 0.0);
                 }
-                continue;
             }
-            let t1 = (p.lo[i] - by) * self.inv_a[i];
-            let t2 = (p.hi[i] - by) * self.inv_a[i];
-            let (l, h) = if p.a[i] > 0.0 { (t1, t2) } else { (t2, t1) };
+        }
+        for i in 0..3 {
+            let by = self.b[i] * y;
+            let l = (self.lower[i] - by) * self.inv[i];
+            let h = (self.upper[i] - by) * self.inv[i];
             if l > lo {
                 lo = l;
             }
