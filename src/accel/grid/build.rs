@@ -35,13 +35,8 @@ pub(super) fn lists(
         }
     };
     let packed = params.layout == TriangleLayout::Packed;
-    let filled = offsets(&mut counts, n_cells, if packed { 4 } else { 1 }).and_then(|total| {
-        if packed {
-            fill_packed(mesh, &kept, &mut counts, total, budget)
-        } else {
-            fill_indexed(mesh, &kept, &mut counts, total, budget)
-        }
-    });
+    let filled = offsets(&mut counts, n_cells, if packed { 4 } else { 1 })
+        .and_then(|total| fill_lists(mesh, &kept, &mut counts, total, packed, budget));
     let references = kept.cells.len();
     kept.release(budget);
     match filled {
@@ -234,16 +229,29 @@ fn fill(
     }
 }
 
-/// The packed lists: ids four to a block beside a copy of their triangles; the gap lanes at the
-/// end of each list hold `Hit::INVALID_ID` and NaN.
+/// The lists: packed (ids four to a block beside a copy of their triangles; the gap lanes at the
+/// end of each list hold `Hit::INVALID_ID` and NaN) or indexed (ids only, unaligned).
 #[inline(never)]
-fn fill_packed(
+fn fill_lists(
     mesh: &TriMesh,
     kept: &Kept,
     counts: &mut [u32],
     total: usize,
+    packed: bool,
     budget: &mut MemoryBudget,
 ) -> Result<Lists, BuildError> {
+    if !packed {
+        let mut ids = budget.filled(total, Hit::INVALID_ID, "grid references")?;
+        fill(mesh, kept, counts, |slot, prim, _| {
+            if let Some(id) = ids.get_mut(slot) {
+                *id = prim;
+            }
+        });
+        return Ok(Lists::Indexed {
+            ids,
+            packs: TrianglePacks::default(),
+        });
+    }
     let blocks = total / 4;
     let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
     let mut tris = match budget.filled(blocks, Block4::default(), "triangle packs") {
@@ -267,24 +275,4 @@ fn fill_packed(
         block.set(slot % 4, tri);
     });
     Ok(Lists::Packed { ids, tris })
-}
-
-/// The indexed lists: ids only, unaligned.
-fn fill_indexed(
-    mesh: &TriMesh,
-    kept: &Kept,
-    counts: &mut [u32],
-    total: usize,
-    budget: &mut MemoryBudget,
-) -> Result<Lists, BuildError> {
-    let mut ids = budget.filled(total, Hit::INVALID_ID, "grid references")?;
-    fill(mesh, kept, counts, |slot, prim, _| {
-        if let Some(id) = ids.get_mut(slot) {
-            *id = prim;
-        }
-    });
-    Ok(Lists::Indexed {
-        ids,
-        packs: TrianglePacks::default(),
-    })
 }

@@ -12,18 +12,19 @@
 //! most facing the triangle give runs of columns, and each column a run of cells along the third
 //! axis — the overlapped cells, with work proportional to them plus the rows.
 //!
-//! Everything is computed in f64 in cell units (`(p − min) / size`), against cells enlarged by
-//! the margin and then by a relative 2^-10: the f64 rounding of these few operations is below
-//! 2^-40 of the coordinates and of the row's constraint width (docs/design.md bounds it), so no
-//! cell the exact test would accept is dropped.
+//! The footprint is computed in f32 with a pad that covers its rounding, the row inequalities in
+//! f64 cell units (`(p − min) / size`), the masks of small footprints in f32 cell units from the
+//! footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10, far
+//! above the rounding of these few operations (docs/design.md bounds it), so no cell the exact test
+//! would accept is dropped.
 
 use glam::{Vec3, Vec3A, Vec4};
 
 use super::layout::Shape;
 
-/// Relative widening of the enlarged cell (in cell units), covering the f64 rounding of the
-/// ranges (docs/design.md: below 2^-11 of a constraint's width for grids of up to 2^32 cells
-/// per axis).
+/// Relative widening of the enlarged cell (in cell units), covering the rounding of the tests
+/// (docs/design.md: below 2^-17 of a constraint's width in f64 for grids of up to 2^32 cells per
+/// axis, below 12·2^-24 in the f32 masks).
 const ROUNDING_SLACK: f64 = 1.0 + 1.0 / 1024.0;
 
 /// What insertion needs of the grid's shape: the footprint in f32, the tests in f64 cell units.
@@ -80,7 +81,7 @@ impl Cells {
     /// `8u·(A/size + res + 1 + 2·margin/size)` cells, which exceeds that, so the f32 footprint holds
     /// every cell whose box enlarged by the margin meets the triangle's bounds.
     pub fn new(shape: &Shape) -> Cells {
-        const U: f64 = f64::EPSILON * 0.5 * (1u64 << 29) as f64; // 2^-24
+        const U: f64 = f32::EPSILON as f64 * 0.5; // 2^-24
         let f = |v: Vec3| [v.x, v.y, v.z].map(f64::from);
         let size = f(shape.cell_size);
         let margin = f(shape.margin);
