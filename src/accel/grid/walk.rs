@@ -129,10 +129,12 @@ impl Line {
 /// box's face); a non-moving axis has `t_next = ∞` and `k = k_end`.
 struct Axes {
     t_next: [f32; 4],
-    /// The next plane's index, an integer below 2^24 held as f32 (exact).
-    k: [f32; 4],
-    k_end: [f32; 4],
-    step: [f32; 4],
+    /// The next plane's index (exact: f32 would stop counting at 2^24 planes, and a grid may have
+    /// more on one axis).
+    k: [u32; 4],
+    k_end: [u32; 4],
+    /// +1 or −1 (as a wrapping add).
+    step: [u32; 4],
     /// The flat index's change per step.
     delta: [usize; 4],
     lo: [f32; 4],
@@ -142,10 +144,11 @@ struct Axes {
 }
 
 impl Axes {
-    /// The t of the plane `k` on `axis`.
+    /// The t of the plane `k` on `axis` (`k` rounded to f32 above 2^24, a whole cell at most:
+    /// such an axis has cells below `u·E` wide, far inside the margin's `16u·E`).
     #[inline(always)]
-    fn plane_t(&self, axis: usize, k: f32) -> f32 {
-        (self.lo[axis] + k * self.size[axis] - self.org[axis]) * self.inv[axis]
+    fn plane_t(&self, axis: usize, k: u32) -> f32 {
+        (self.lo[axis] + k as f32 * self.size[axis] - self.org[axis]) * self.inv[axis]
     }
 }
 
@@ -169,9 +172,9 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         let t_start = line.t0.clamp(-f32::MAX, f32::MAX);
         let mut axes = Axes {
             t_next: [f32::INFINITY; 4],
-            k: [0.0; 4],
-            k_end: [0.0; 4],
-            step: [0.0; 4],
+            k: [0; 4],
+            k_end: [0; 4],
+            step: [0; 4],
             delta: [0; 4],
             lo: [0.0; 4],
             size: [0.0; 4],
@@ -193,10 +196,9 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             let inv = line.inv[a];
             let up = line.dir[a] > 0.0;
             if inv.is_finite() {
-                let k = cell + u32::from(up);
-                axes.k[a] = k as f32;
-                axes.k_end[a] = if up { res as f32 } else { 0.0 };
-                axes.step[a] = if up { 1.0 } else { -1.0 };
+                axes.k[a] = cell + u32::from(up);
+                axes.k_end[a] = if up { res } else { 0 };
+                axes.step[a] = if up { 1 } else { u32::MAX };
                 axes.delta[a] = if up { stride } else { stride.wrapping_neg() };
                 axes.lo[a] = shape.bounds.min[a];
                 axes.size[a] = shape.cell_size[a];
@@ -246,9 +248,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
             // cell's far plane on that side and stops at the box's face.
             index = index.wrapping_add(axes.delta[axis]);
-            let k = axes.k[axis] + axes.step[axis];
+            let k = axes.k[axis].wrapping_add(axes.step[axis]);
             axes.k[axis] = k;
             axes.t_next[axis] = axes.plane_t(axis, k);
+            debug_assert!(index < grid.cell_count());
         }
     }
 }
