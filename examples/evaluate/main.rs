@@ -1031,5 +1031,74 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             );
         }
     }
+    embree_best_section(&mut md, results, &at);
     md
+}
+
+/// AUTO (known budget) against Embree's best build quality (LOW or MEDIUM) at 10⁴ and 10⁵ rays on
+/// the scenes above 50 000 triangles, and the grid's build against Embree LOW's there (issue 13's
+/// goals).
+fn embree_best_section(md: &mut String, results: &[Measured], at: &dyn Fn(usize, f64) -> Totals) {
+    let embree = |m: &Measured, label: &str| {
+        m.peers
+            .iter()
+            .find(|p| p.label == label)
+            .map(|p| (p.build_ns, p.ray_ns))
+    };
+    let large: Vec<usize> = (0..results.len())
+        .filter(|&i| results[i].triangles > 50_000)
+        .filter(|&i| {
+            embree(&results[i], "Embree LOW").is_some()
+                && embree(&results[i], "Embree MEDIUM").is_some()
+        })
+        .collect();
+    if large.is_empty() {
+        return;
+    }
+    let _ = writeln!(
+        md,
+        "## AUTO against Embree's best, scenes above 50 000 triangles\n\nAUTO's total (known \
+         budget: grid build, sample rays, the choice, the rays) over the better of Embree LOW and \
+         MEDIUM (build + the same rays), and the grid's build time (`UniformGrid::build`, the mesh \
+         already validated) over Embree LOW's.\n"
+    );
+    let _ = writeln!(md, "| scene | N | AUTO / Embree best, 10⁴ | 10⁵ | grid build / Embree LOW |\n|---|---:|---:|---:|---:|");
+    let mut wins = [0usize; 2];
+    let mut builds = Vec::new();
+    for &i in &large {
+        let m = &results[i];
+        let (lo, me) = (
+            embree(m, "Embree LOW").unwrap_or_default(),
+            embree(m, "Embree MEDIUM").unwrap_or_default(),
+        );
+        let mut cells = Vec::new();
+        for (k, r) in [1e4, 1e5].into_iter().enumerate() {
+            let best = ((lo.0 + r * lo.1).min(me.0 + r * me.1)) * 1e-9;
+            let q = at(i, r).auto_known / best;
+            wins[k] += usize::from(q <= 1.0);
+            cells.push(format!("{q:.2}"));
+        }
+        let b = m.obs.grid_build_ns / lo.0;
+        builds.push(b);
+        let _ = writeln!(
+            md,
+            "| {} | {} | {} | {:.2} |",
+            m.name,
+            m.triangles,
+            cells.join(" | "),
+            b
+        );
+    }
+    let _ = writeln!(
+        md,
+        "\nAUTO ≤ Embree's best on {} of {} scenes at 10⁴ rays and {} of {} at 10⁵; grid build / \
+         Embree LOW: median {:.2} (range {:.2}–{:.2}).\n",
+        wins[0],
+        large.len(),
+        wins[1],
+        large.len(),
+        median(&mut builds.clone()),
+        builds.iter().copied().fold(f64::INFINITY, f64::min),
+        builds.iter().copied().fold(0.0, f64::max)
+    );
 }

@@ -139,25 +139,10 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
                 &gathered
             }
         };
-        let mut survivors = test.survivors(block) & lanes;
-        while survivors != 0 {
-            let lane = survivors.trailing_zeros() as usize;
-            survivors &= survivors - 1;
-            // The padding of block-aligned lists (never a survivor while the filter runs).
-            let Some(&prim) = ids.get(base + lane).filter(|&&p| p != Hit::INVALID_ID) else {
-                continue;
-            };
-            if MAILBOX && mailbox.seen(prim) {
-                continue;
-            }
-            if let Some(h) = counted_hit(test, prim, &block.get(lane)) {
-                if ANY {
-                    return Some(h);
-                }
-                if h.beats(best) {
-                    *best = h;
-                }
-            }
+        let survivors = test.survivors(block) & lanes;
+        let id = |lane: usize| ids.get(base + lane).copied().unwrap_or(Hit::INVALID_ID);
+        if let Some(h) = test_lanes::<T, ANY>(test, block, survivors, id, best, mailbox) {
+            return Some(h);
         }
         base += 4;
     }
@@ -174,6 +159,65 @@ pub(crate) fn counted_hit<T: TriangleTest>(test: &T, prim: u32, tri: &[Vec3; 3])
         v: hit.v,
         prim,
     })
+}
+
+/// Tests whole blocks of a block-aligned list: lane `k` of `tris[b]` holds the triangle `ids[b][k]`
+/// (`Hit::INVALID_ID` and NaN in unused lanes). The same answer as [`test_refs`] on the same list:
+/// the best hit kept in `best` by [`Hit::beats`], or with `ANY` the first hit at once.
+#[inline(always)]
+pub(crate) fn test_blocks<T: TriangleTest, const ANY: bool>(
+    test: &T,
+    tris: &[Block4],
+    ids: &[[u32; 4]],
+    best: &mut Hit,
+    mailbox: &mut Mailbox,
+) -> Option<Hit> {
+    for (block, ids) in tris.iter().zip(ids) {
+        let survivors = test.survivors(block);
+        if survivors == 0 {
+            continue;
+        }
+        let id = |lane: usize| ids[lane & 3];
+        if let Some(h) = test_lanes::<T, ANY>(test, block, survivors, id, best, mailbox) {
+            return Some(h);
+        }
+    }
+    None
+}
+
+/// The exact test on the lanes `survivors` of `block` whose id (`id(lane)`) is a real triangle not
+/// yet tested by this query (the mailbox), keeping the best hit in `best`; with `ANY`, returns the
+/// first hit at once.
+#[inline(always)]
+fn test_lanes<T: TriangleTest, const ANY: bool>(
+    test: &T,
+    block: &Block4,
+    mut survivors: u32,
+    id: impl Fn(usize) -> u32,
+    best: &mut Hit,
+    mailbox: &mut Mailbox,
+) -> Option<Hit> {
+    while survivors != 0 {
+        let lane = survivors.trailing_zeros() as usize;
+        survivors &= survivors - 1;
+        let prim = id(lane);
+        // The padding of block-aligned lists (never a survivor while the filter runs).
+        if prim == Hit::INVALID_ID {
+            continue;
+        }
+        if MAILBOX && mailbox.seen(prim) {
+            continue;
+        }
+        if let Some(h) = counted_hit(test, prim, &block.get(lane)) {
+            if ANY {
+                return Some(h);
+            }
+            if h.beats(best) {
+                *best = h;
+            }
+        }
+    }
+    None
 }
 
 /// The triangles of `ids[base..base + 4]` named by `lanes`, from the mesh (the indexed layout).

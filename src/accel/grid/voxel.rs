@@ -1,0 +1,578 @@
+//! Which cells a triangle is listed in: every cell whose box, enlarged by the margin, the triangle
+//! meets — a conservative voxelization, found by ranges of cells rather than by testing cells.
+//!
+//! The separating-axis theorem for a triangle and a box has 13 axes: the box's three (the
+//! triangle's bounds settle them: the footprint), the triangle's normal (the plane test), and the
+//! nine products of an edge with a box axis. The product of edge `e` with axis `x` is the normal of
+//! `e` projected onto the yz plane, so those nine axes are exactly the edge normals of the
+//! triangle's three axis-plane projections: a cell overlaps when its footprint, the plane, and the
+//! three projections (2D triangle against the cell's rectangle) all say so. Each of these
+//! conditions is a pair of linear inequalities in the cell's centre, so for a fixed row (or column)
+//! of cells it is an interval of the remaining coordinate: rows of the projection onto the plane
+//! most facing the triangle give runs of columns, and each column a run of cells along the third
+//! axis — the overlapped cells, with work proportional to them plus the rows.
+//!
+//! The footprint is computed in f32 with a pad that covers its rounding, the row inequalities in
+//! f64 cell units (`(p − min) / size`), the masks of small footprints in f32 cell units from the
+//! footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10, far
+//! above the rounding of these few operations (docs/design.md bounds it), so no cell the exact test
+//! would accept is dropped.
+
+use glam::{Vec3, Vec3A, Vec4};
+
+use super::layout::Shape;
+
+/// Relative widening of the enlarged cell (in cell units), covering the rounding of the tests
+/// (docs/design.md: below 2^-17 of a constraint's width in f64 for grids of up to 2^32 cells per
+/// axis, below 12·2^-24 in the f32 masks).
+const ROUNDING_SLACK: f64 = 1.0 + 1.0 / 1024.0;
+
+/// What insertion needs of the grid's shape: the footprint in f32, the tests in f64 cell units.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Cells {
+    res: [u32; 3],
+    /// The flat index's step per axis.
+    stride: [usize; 3],
+    /// The flat index's offset of the cell `i, j, k` (bit `i + 2j + 4k`) from a footprint's corner.
+    pub corner: [usize; 8],
+    min32: Vec3A,
+    /// `res / (max − min)` in f32.
+    inv32: Vec3A,
+    /// The margin plus a bound on the f32 footprint's rounding, in world units (see
+    /// [`Cells::new`]).
+    pad32: Vec3A,
+    min: [f64; 3],
+    /// 1 / cell size.
+    inv: [f64; 3],
+    /// Half an enlarged cell in cells, widened by the rounding slack.
+    half: [f64; 3],
+}
+
+/// The cells of a triangle's bounds enlarged by the margin, `lo[a]..=hi[a]` per axis.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) struct Footprint {
+    pub lo: [u32; 3],
+    pub hi: [u32; 3],
+}
+
+impl Footprint {
+    /// Cells along `axis`.
+    #[inline(always)]
+    pub fn len(&self, axis: usize) -> u32 {
+        self.hi[axis] - self.lo[axis] + 1
+    }
+}
+
+/// A triangle's cells, as [`Cells::classify`] finds them.
+pub(super) enum Overlap {
+    /// The cells `base + corner[bit]` for the bits of `mask` (bit `i + 2j + 4k` is the cell `i, j,
+    /// k` up from the footprint's corner `base`).
+    Small { base: usize, mask: u32 },
+    /// A footprint of more than two cells on some axis.
+    Large(Footprint),
+}
+
+impl Cells {
+    /// The insertion geometry of a non-empty grid.
+    ///
+    /// The footprint is computed in f32 as `(p ∓ pad − min)·inv`, three roundings on values up to
+    /// `2A + pad` (A the box's coordinate magnitude) and an inverse within 2u of `1/size`: off by
+    /// at most `3u·(A + pad)/size + 3.01u·(res + pad/size)` cells. The pad is the margin plus
+    /// `8u·(A/size + res + 1 + 2·margin/size)` cells, which exceeds that, so the f32 footprint holds
+    /// every cell whose box enlarged by the margin meets the triangle's bounds.
+    pub fn new(shape: &Shape) -> Cells {
+        const U: f64 = f32::EPSILON as f64 * 0.5; // 2^-24
+        let f = |v: Vec3| [v.x, v.y, v.z].map(f64::from);
+        let size = f(shape.cell_size);
+        let margin = f(shape.margin);
+        let inv = size.map(|s| 1.0 / s);
+        let scale = f64::from(
+            shape
+                .bounds
+                .min
+                .abs()
+                .max(shape.bounds.max.abs())
+                .max_element(),
+        );
+        let pad = [0, 1, 2].map(|a| {
+            let cells = 8.0
+                * U
+                * (scale * inv[a] + f64::from(shape.res[a]) + 1.0 + 2.0 * margin[a] * inv[a]);
+            ((margin[a] + cells * size[a]) * (1.0 + 1.0 / 1_048_576.0)) as f32
+        });
+        let resf = Vec3::new(
+            shape.res[0] as f32,
+            shape.res[1] as f32,
+            shape.res[2] as f32,
+        );
+        let stride = [
+            1,
+            shape.res[0] as usize,
+            shape.res[0] as usize * shape.res[1] as usize,
+        ];
+        Cells {
+            res: shape.res,
+            stride,
+            corner: core::array::from_fn(|b| {
+                (b & 1) * stride[0] + ((b >> 1) & 1) * stride[1] + (b >> 2) * stride[2]
+            }),
+            min32: shape.bounds.min.into(),
+            inv32: (resf / (shape.bounds.max - shape.bounds.min)).into(),
+            pad32: Vec3::from(pad).into(),
+            min: f(shape.bounds.min),
+            inv,
+            half: [0, 1, 2].map(|a| (0.5 + margin[a] * inv[a]) * ROUNDING_SLACK),
+        }
+    }
+
+    /// The flat index of cell `c`.
+    #[inline(always)]
+    pub fn index(&self, c: [u32; 3]) -> usize {
+        c[0] as usize * self.stride[0]
+            + c[1] as usize * self.stride[1]
+            + c[2] as usize * self.stride[2]
+    }
+
+    /// Coordinate `p` on `axis` in cell units.
+    #[inline(always)]
+    fn local(&self, p: f32, axis: usize) -> f64 {
+        (f64::from(p) - self.min[axis]) * self.inv[axis]
+    }
+
+    /// A superset of the cells whose enlarged boxes meet the triangle's bounds (clamped to the
+    /// grid), in f32 (see [`Cells::new`] for why it misses none).
+    #[inline(always)]
+    pub fn footprint(&self, tri: &[Vec3; 3]) -> Footprint {
+        // Four lanes at a time (the fourth unused); coordinates are finite, so `min`/`max` need
+        // no NaN handling.
+        let [p, q, r] = tri.map(Vec3A::from);
+        let lo = p.min(q).min(r);
+        let hi = p.max(q).max(r);
+        let l = (lo - self.pad32 - self.min32) * self.inv32;
+        let h = (hi + self.pad32 - self.min32) * self.inv32;
+        // The cell of a value is its floor clamped to the grid: clamp to [0, 2^30] first (NaN
+        // fails `f > 0` and becomes 0), truncate (floor, for a non-negative value), then clamp to
+        // the last cell.
+        let cell = |f: f32, a: usize| {
+            let f = if f > 0.0 { f } else { 0.0 };
+            let f = if f < 1_073_741_824.0 {
+                f
+            } else {
+                1_073_741_824.0
+            };
+            debug_assert!((0.0..=1_073_741_824.0).contains(&f));
+            // SAFETY: `f` is in [0, 2^30], so it is not NaN and its truncation fits an i32.
+            (unsafe { f.to_int_unchecked::<i32>() } as u32).min(self.res[a] - 1)
+        };
+        Footprint {
+            lo: [cell(l.x, 0), cell(l.y, 1), cell(l.z, 2)],
+            hi: [cell(h.x, 0), cell(h.y, 1), cell(h.z, 2)],
+        }
+    }
+
+    /// Calls `emit(cell)` for every cell the triangle overlaps: every cell whose box, enlarged by
+    /// the margin, meets it (and perhaps a few that only come within the rounding slack of it).
+    /// With `exact == false`, every cell of its footprint. (The build inlines the same with its
+    /// own emission, build.rs.)
+    #[cfg(test)]
+    pub fn for_each(&self, tri: &[Vec3; 3], exact: bool, emit: &mut impl FnMut(u32)) {
+        match self.classify(tri, exact) {
+            Overlap::Small { base, mut mask } => {
+                while mask != 0 {
+                    let bit = mask.trailing_zeros() as usize;
+                    mask &= mask - 1;
+                    emit((base + self.corner[bit & 7]) as u32);
+                }
+            }
+            Overlap::Large(fp) => self.for_each_large(tri, &fp, exact, emit),
+        }
+    }
+
+    /// The cells of a triangle as a mask when its footprint has at most two cells per axis
+    /// (nearly every triangle of a well-shaped scene), else the footprint for
+    /// [`Cells::for_each_large`].
+    #[inline(always)]
+    pub fn classify(&self, tri: &[Vec3; 3], exact: bool) -> Overlap {
+        let fp = self.footprint(tri);
+        let n = [0, 1, 2].map(|a| fp.hi[a] - fp.lo[a]);
+        if (n[0] | n[1] | n[2]) > 1 {
+            return Overlap::Large(fp);
+        }
+        // The footprint as bits i + 2j + 4k (the cell i, j, k up from its corner). A single cell
+        // or a column needs no test: the (connected) triangle crosses a column from end to end
+        // while lying within its enlarged cross-section, so it meets every cell of it.
+        let mut mask = 1u32;
+        mask |= (mask << 1) * n[0];
+        mask |= (mask << 2) * n[1];
+        mask |= (mask << 4) * n[2];
+        if exact && n[0] + n[1] + n[2] >= 2 {
+            mask &= self.small(tri, &fp, n.map(|n| n > 0));
+        }
+        Overlap::Small {
+            base: self.index(fp.lo),
+            mask,
+        }
+    }
+
+    /// [`Cells::for_each`] for a footprint of more than two cells on some axis.
+    #[inline(never)]
+    pub fn for_each_large(
+        &self,
+        tri: &[Vec3; 3],
+        fp: &Footprint,
+        exact: bool,
+        emit: &mut impl FnMut(u32),
+    ) {
+        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
+        if !exact || thick.iter().filter(|&&t| t).count() < 2 {
+            self.for_box(fp, emit);
+        } else {
+            let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
+            self.overlapped(&q, fp, thick, emit);
+        }
+    }
+
+    /// The cells a triangle overlaps among those of a footprint of at most two cells per axis,
+    /// two on two or three axes (`thick`), as bits `i + 2j + 4k` (the cell `i, j, k` up from the
+    /// footprint's corner): the separating axes cell by cell, four cells at a time — each
+    /// projection's edges as a mask of its 2×2 cells, and the plane.
+    ///
+    /// In f32, in cell units from the footprint's corner (converted from f64 cell units, so the
+    /// values are below 2 + 2·margin): the few roundings of each test are below 2^-20 of its
+    /// width, well inside the rounding slack.
+    #[inline(never)]
+    fn small(&self, tri: &[Vec3; 3], fp: &Footprint, thick: [bool; 3]) -> u32 {
+        let q = tri.map(|p| [0, 1, 2].map(|a| (self.local(p[a], a) - f64::from(fp.lo[a])) as f32));
+        let half = self.half.map(|h| h as f32);
+        // The projection onto axes (x, y), its 2×2 mask spread to the cells at offset 0 on the
+        // third axis.
+        let quad = |x: usize, y: usize| {
+            let m = quad_mask(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
+            let (wx, wy) = (1 << x, 1 << y);
+            (m & 1) | ((m >> 1) & 1) << wx | ((m >> 2) & 1) << wy | ((m >> 3) & 1) << (wx + wy)
+        };
+        match thick {
+            // One cell thick on an axis: the projection onto the other two decides (for_each).
+            [false, _, _] => quad(1, 2),
+            [_, false, _] => quad(2, 0),
+            [_, _, false] => quad(0, 1),
+            _ => {
+                let (xy, yz, zx) = (quad(0, 1), quad(1, 2), quad(2, 0));
+                let mask = (xy | xy << 4) & (yz | yz << 1) & (zx | zx << 2);
+                mask & plane_mask(&q, half)
+            }
+        }
+    }
+
+    /// Every cell of `fp`.
+    #[inline(always)]
+    fn for_box(&self, fp: &Footprint, emit: &mut impl FnMut(u32)) {
+        for z in fp.lo[2]..=fp.hi[2] {
+            for y in fp.lo[1]..=fp.hi[1] {
+                let row = self.index([fp.lo[0], y, z]);
+                for x in 0..=(fp.hi[0] - fp.lo[0]) as usize {
+                    emit((row + x) as u32);
+                }
+            }
+        }
+    }
+
+    /// The cells of `fp` the triangle (`q`, in cell units) overlaps, for a footprint at least two
+    /// cells thick on two or three axes (`thick`): runs of cells by rows.
+    #[inline(never)]
+    fn overlapped(
+        &self,
+        q: &[[f64; 3]; 3],
+        fp: &Footprint,
+        thick: [bool; 3],
+        emit: &mut impl FnMut(u32),
+    ) {
+        // Rows along `v`, runs along `u`; `w` is the third axis. With a footprint one cell thick
+        // on `w`, the enlarged cells hold the triangle's whole extent along `w`, so only the
+        // projection onto (u, v) decides. Otherwise `w` is the normal's largest axis, so that
+        // each column (u, v) holds a run of at most about three cells along `w`.
+        let normal = cross(sub(q[1], q[0]), sub(q[2], q[0]));
+        let w = match thick {
+            [false, _, _] => 0,
+            [_, false, _] => 1,
+            [_, _, false] => 2,
+            _ => largest_axis(normal),
+        };
+        let (a, b) = ((w + 1) % 3, (w + 2) % 3);
+        // Fewer rows than columns: rows cost a setup each.
+        let (u, v) = if fp.len(a) >= fp.len(b) {
+            (a, b)
+        } else {
+            (b, a)
+        };
+        let uv = Rows::new(q, u, v, &self.half);
+        let span = |axis: usize| (f64::from(fp.lo[axis]) + 0.5, f64::from(fp.hi[axis]) + 0.5);
+        let (u_span, w_span) = (span(u), span(w));
+        if !thick[w] {
+            for j in fp.lo[v]..=fp.hi[v] {
+                let cv = f64::from(j) + 0.5;
+                let Some((i0, i1)) = cells_in(uv.solve(cv, u_span)) else {
+                    continue;
+                };
+                let row = j as usize * self.stride[v] + fp.lo[w] as usize * self.stride[w];
+                for i in i0..=i1 {
+                    emit((row + i as usize * self.stride[u]) as u32);
+                }
+            }
+            return;
+        }
+        let vw = Rows::new(q, w, v, &self.half);
+        let wu = Rows::new(q, w, u, &self.half);
+        // The plane: n·(c − q0) within the vertices' projections onto the (computed, so not
+        // exact: all three are projected) normal, widened by Σ |n_k|·half_k; solved for c_w per
+        // column.
+        let reach = (0..3).fold(0.0, |s, k| s + normal[k].abs() * self.half[k]);
+        let dot = |v: [f64; 3]| normal[0] * v[0] + normal[1] * v[1] + normal[2] * v[2];
+        let (d1, d2) = (dot(sub(q[1], q[0])), dot(sub(q[2], q[0])));
+        let (plane_lo, plane_hi) = (d1.min(d2).min(0.0) - reach, d1.max(d2).max(0.0) + reach);
+        let inv_nw = 1.0 / normal[w];
+        for j in fp.lo[v]..=fp.hi[v] {
+            let cv = f64::from(j) + 0.5;
+            let Some((i0, i1)) = cells_in(uv.solve(cv, u_span)) else {
+                continue;
+            };
+            let w_row = vw.solve(cv, w_span);
+            if !(w_row.0 <= w_row.1) {
+                continue;
+            }
+            let row = j as usize * self.stride[v];
+            let off_v = normal[v] * (cv - q[0][v]);
+            for i in i0..=i1 {
+                let cu = f64::from(i) + 0.5;
+                let (mut lo, mut hi) = wu.solve(cu, w_row);
+                let rest = normal[u] * (cu - q[0][u]) + off_v;
+                // n_w ≠ 0 unless the normal vanished in rounding (then the plane says nothing).
+                if inv_nw.is_finite() {
+                    let t1 = q[0][w] + (plane_lo - rest) * inv_nw;
+                    let t2 = q[0][w] + (plane_hi - rest) * inv_nw;
+                    let (l, h) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
+                    if l > lo {
+                        lo = l;
+                    }
+                    if h < hi {
+                        hi = h;
+                    }
+                }
+                let Some((k0, k1)) = cells_in((lo, hi)) else {
+                    continue;
+                };
+                let column = row + i as usize * self.stride[u];
+                for k in k0..=k1 {
+                    emit((column + k as usize * self.stride[w]) as u32);
+                }
+            }
+        }
+    }
+}
+
+/// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
+const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
+const QUAD_Y: Vec4 = Vec4::new(0.5, 0.5, 1.5, 1.5);
+
+/// Which of the 2×2 cells centred at `(0.5 + i, 0.5 + j)`, `i, j ∈ {0, 1}`, of half extent
+/// `half` the projected triangle `p` may meet (bit `i + 2j`): each edge's normal separates the
+/// cells whose projection onto it misses the triangle's (the edge's vertices at 0, the opposite
+/// one at `far`, relative to the edge's first vertex). A NaN keeps the cell.
+#[inline(always)]
+fn quad_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
+    let mut mask = 0b1111;
+    for i in 0..3 {
+        let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+        let (a, b) = (e[1] - s[1], s[0] - e[0]);
+        let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
+        let r = a.abs() * half[0] + b.abs() * half[1];
+        let (lo, hi) = (far.min(0.0) - r, far.max(0.0) + r);
+        let v = Vec4::splat(a) * (QUAD_X - Vec4::splat(s[0]))
+            + Vec4::splat(b) * (QUAD_Y - Vec4::splat(s[1]));
+        mask &= (!(v.cmplt(Vec4::splat(lo)) | v.cmpgt(Vec4::splat(hi)))).bitmask();
+    }
+    mask
+}
+
+/// Which of the 2×2×2 cells centred at `(0.5 + i, 0.5 + j, 0.5 + k)` of half extent `half` the
+/// triangle's plane may cross (bit `i + 2j + 4k`): the normal `n`, computed, need not be exact —
+/// any axis separates when the projections miss — so all three vertices are projected onto it
+/// (`0`, `d1`, `d2` relative to `q0`). A NaN keeps the cell.
+#[inline(always)]
+fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
+    let d = |i: usize| [0, 1, 2].map(|a| q[i][a] - q[0][a]);
+    let (e1, e2) = (d(1), d(2));
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    let dot = |v: [f32; 3]| n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    let (d1, d2) = (dot(e1), dot(e2));
+    let r = n[0].abs() * half[0] + n[1].abs() * half[1] + n[2].abs() * half[2];
+    let lo = Vec4::splat(d1.min(d2).min(0.0) - r);
+    let hi = Vec4::splat(d1.max(d2).max(0.0) + r);
+    let v = Vec4::splat(n[0]) * (QUAD_X - Vec4::splat(q[0][0]))
+        + Vec4::splat(n[1]) * (QUAD_Y - Vec4::splat(q[0][1]));
+    let mut mask = 0;
+    for (k, cz) in [0.5f32, 1.5].into_iter().enumerate() {
+        let w = v + Vec4::splat(n[2] * (cz - q[0][2]));
+        mask |= (!(w.cmplt(lo) | w.cmpgt(hi))).bitmask() << (4 * k);
+    }
+    mask
+}
+
+/// The cells `k` whose centres `k + 0.5` lie in `[lo, hi]`, for bounds that start inside a
+/// footprint (`lo ≥ 0.5`) and were only narrowed: `None` when there are none.
+#[inline(always)]
+fn cells_in((lo, hi): (f64, f64)) -> Option<(u32, u32)> {
+    let (a, b) = (lo - 0.5, hi - 0.5);
+    // Both are at least `a ≥ 0` when the range is not empty, so truncation is floor, and
+    // `ceil(a) = trunc(a) + (trunc(a) < a)`; huge values saturate and stay out of range.
+    if !(a <= b) {
+        return None;
+    }
+    let t = a as u32;
+    let first = t + u32::from(f64::from(t) < a);
+    let last = b as u32;
+    (first <= last).then_some((first, last))
+}
+
+/// One axis-plane projection of the triangle, as constraints on the centre `(x, y)` of an
+/// enlarged cell (`x` on the axis solved for, `y` on the given one): for each edge with normal
+/// `(a, b)`, `lo ≤ a·x + b·y ≤ hi`, the triangle's projection onto the normal widened by the
+/// cell's projected half extent. Both sides are kept: a needle's widened tip would otherwise reach
+/// far beyond it.
+struct Projection {
+    a: [f64; 3],
+    b: [f64; 3],
+    lo: [f64; 3],
+    hi: [f64; 3],
+}
+
+impl Projection {
+    /// The projection with vertices `p` (cell units; `x` the coordinate solved for, `y` the given
+    /// one) against cells of half extent `half`.
+    #[inline(always)]
+    fn new(p: [[f64; 2]; 3], half: [f64; 2]) -> Projection {
+        let mut out = Projection {
+            a: [0.0; 3],
+            b: [0.0; 3],
+            lo: [0.0; 3],
+            hi: [0.0; 3],
+        };
+        for i in 0..3 {
+            let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+            let (a, b) = (e[1] - s[1], s[0] - e[0]);
+            let k = a * s[0] + b * s[1];
+            // The opposite vertex's side, from differences (accurate for small triangles far
+            // from the grid's corner).
+            let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
+            let r = a.abs() * half[0] + b.abs() * half[1];
+            out.a[i] = a;
+            out.b[i] = b;
+            out.lo[i] = k + far.min(0.0) - r;
+            out.hi[i] = k + far.max(0.0) + r;
+        }
+        out
+    }
+}
+
+/// A [`Projection`] solved row by row: per edge, `x ≥ (lower − b·y)·inv` and `x ≤ (upper −
+/// b·y)·inv` (the projection's bounds, swapped for a negative `a`, `inv = 1/a`); an edge with
+/// `a = 0` constrains `y` alone (`lo ≤ b·y ≤ hi`).
+struct Rows {
+    b: [f64; 3],
+    lower: [f64; 3],
+    upper: [f64; 3],
+    inv: [f64; 3],
+    /// Whether some edge has `a = 0` (then `solve` checks `y` against it).
+    flat: bool,
+    p: Projection,
+}
+
+impl Rows {
+    #[inline(always)]
+    fn new(q: &[[f64; 3]; 3], x: usize, y: usize, half: &[f64; 3]) -> Rows {
+        let p = Projection::new(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
+        let mut r = Rows {
+            b: p.b,
+            lower: [f64::NEG_INFINITY; 3],
+            upper: [f64::INFINITY; 3],
+            inv: [0.0; 3],
+            flat: false,
+            p,
+        };
+        for i in 0..3 {
+            let a = r.p.a[i];
+            if a == 0.0 {
+                // No bound on x from this edge (−∞ − b·y stays −∞: `inv = 1` keeps it so).
+                r.flat = true;
+                r.b[i] = 0.0;
+                r.inv[i] = 1.0;
+            } else {
+                r.inv[i] = 1.0 / a;
+                (r.lower[i], r.upper[i]) = if a > 0.0 {
+                    (r.p.lo[i], r.p.hi[i])
+                } else {
+                    (r.p.hi[i], r.p.lo[i])
+                };
+            }
+        }
+        r
+    }
+
+    /// The centres `x` allowed at `y`, narrowing `(lo, hi)`; `lo > hi` when none is. A NaN bound
+    /// (0·∞ for a vanishing `a`) never narrows.
+    #[inline(always)]
+    fn solve(&self, y: f64, (mut lo, mut hi): (f64, f64)) -> (f64, f64) {
+        if self.flat {
+            let p = &self.p;
+            for i in 0..3 {
+                let by = p.b[i] * y;
+                if p.a[i] == 0.0 && !(by >= p.lo[i] && by <= p.hi[i]) {
+                    return (1.0, 0.0);
+                }
+            }
+        }
+        for i in 0..3 {
+            let by = self.b[i] * y;
+            let l = (self.lower[i] - by) * self.inv[i];
+            let h = (self.upper[i] - by) * self.inv[i];
+            if l > lo {
+                lo = l;
+            }
+            if h < hi {
+                hi = h;
+            }
+        }
+        (lo, hi)
+    }
+}
+
+#[inline(always)]
+fn sub(p: [f64; 3], q: [f64; 3]) -> [f64; 3] {
+    [p[0] - q[0], p[1] - q[1], p[2] - q[2]]
+}
+
+#[inline(always)]
+fn cross(u: [f64; 3], w: [f64; 3]) -> [f64; 3] {
+    [
+        u[1] * w[2] - u[2] * w[1],
+        u[2] * w[0] - u[0] * w[2],
+        u[0] * w[1] - u[1] * w[0],
+    ]
+}
+
+/// The axis of `n`'s largest component (ties to the lower axis).
+#[inline(always)]
+fn largest_axis(n: [f64; 3]) -> usize {
+    let m = n.map(f64::abs);
+    if m[0] >= m[1] && m[0] >= m[2] {
+        0
+    } else if m[1] >= m[2] {
+        1
+    } else {
+        2
+    }
+}

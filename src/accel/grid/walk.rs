@@ -1,0 +1,307 @@
+//! The walk: an Amanatides–Woo 3D-DDA over the cells a ray crosses inside `[tmin, tmax]`, front
+//! to back, testing each cell's list; far origins and extreme directions are walked on a
+//! rescaled line without the early exit (docs/design.md, "Uniform grid").
+
+use glam::Vec3;
+
+use super::{GridWork, UniformGrid};
+use crate::accel::brute::test_all;
+use crate::accel::Mailbox;
+use crate::mesh::TriMesh;
+use crate::ray::Hit;
+use crate::triangle::{PreparedRay, TriangleLoop, TriangleTest};
+
+/// One query's walk. `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
+pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
+    pub grid: &'a UniformGrid,
+    pub mesh: &'a TriMesh,
+    pub work: &'a mut GridWork,
+}
+
+/// Origins farther than this many of the smallest cells from the grid are walked by testing every
+/// triangle: beyond it the f64 entry point of a far ray may be off its line by more than the margin.
+const FAR_WALK_CELLS: f32 = 1.099_511_6e12;
+
+/// 16·2^-149: sixteen times the largest error of a subnormal `t`, per unit of direction. Directions
+/// longer than `margin / SUBNORMAL_T_ERROR` are walked scaled (see [`Line::of`]).
+const SUBNORMAL_T_ERROR: f64 = 2.242_077_542_919_707_3e-44;
+
+/// The line a ray is walked on, its window, and whether the walk may stop at the first cell
+/// whose exit lies beyond the best hit.
+struct Line {
+    org: Vec3,
+    dir: Vec3,
+    inv: Vec3,
+    t0: f32,
+    t1: f32,
+    early_exit: bool,
+}
+
+/// How a ray is answered.
+enum Plan {
+    /// It misses the grid's box.
+    Miss,
+    /// Its origin is too far for any walk: every triangle is tested.
+    TestAll,
+    /// Walk this line.
+    Walk(Line),
+}
+
+impl Line {
+    /// The line to walk for `r` through `grid` (non-empty), clipped to the box.
+    #[inline(always)]
+    fn of(grid: &UniformGrid, r: &PreparedRay) -> Plan {
+        let shape = &grid.shape;
+        let (mut o, mut d) = (r.org, r.dir);
+        let (mut t0, mut t1) = (r.tmin, r.tmax);
+        let (lo, hi) = (shape.bounds.min, shape.bounds.max);
+        let mut early_exit = true;
+        // An origin farther than the margin covers: walk the same line from where it enters the
+        // box (found in f64, rounded to f32: off the line by far less than the margin), over the
+        // whole box and without the early exit, whose t would be in the wrong frame. Beyond 2^40
+        // cells even the f64 entry point may be off by more than the margin: test every triangle.
+        let reach = (lo - o).abs().max((hi - o).abs()).max_element();
+        if !(reach <= shape.near_reach) {
+            if !(reach <= FAR_WALK_CELLS * shape.min_cell) {
+                return Plan::TestAll;
+            }
+            match entry_point(o, d, lo, hi) {
+                Some(p) => o = p,
+                None => return Plan::Miss,
+            }
+            early_exit = false;
+            t0 = -f32::INFINITY;
+            t1 = f32::INFINITY;
+        }
+        // Directions whose t would leave the range where f32 keeps 24 bits: a non-zero component too
+        // small to invert (below ~3e-39) still moves along that axis over the f32 range of t; one
+        // small against the scene's coordinates can make the t of crossing the scene overflow; one
+        // so large that t becomes subnormal loses the precision the margin counts on (a subnormal
+        // t is off by up to 2^-149 in absolute terms, 2^-149·|d| in space). Walk the same line with
+        // the direction scaled by a power of two (no rounding) to a largest component in [1, 2),
+        // over the whole box and without the early exit, whose t would be in other units. A
+        // component that is still too small to invert is below 2^-126 of the largest, so across
+        // the box the ray moves along it by less than 2^-126 of the box's extent, far inside the
+        // box's padding and the cells' margin: treating that axis as parallel still covers the line.
+        let mut inv = Vec3::ONE / d;
+        let largest = d.abs().max_element();
+        let magnitude = lo.abs().max(hi.abs()).max_element() + o.abs().max_element();
+        let uninvertible = (0..3).any(|a| d[a] != 0.0 && !inv[a].is_finite());
+        let may_overflow = largest * (f32::MAX / 1024.0) < magnitude;
+        let subnormal_t =
+            f64::from(largest) * SUBNORMAL_T_ERROR > f64::from(shape.margin.min_element());
+        if uninvertible || may_overflow || subnormal_t {
+            early_exit = false;
+            d = unit_scaled(d, largest);
+            inv = Vec3::ONE / d;
+            t0 = -f32::INFINITY;
+            t1 = f32::INFINITY;
+        }
+        for a in 0..3 {
+            if inv[a].is_finite() {
+                let ta = (lo[a] - o[a]) * inv[a];
+                let tb = (hi[a] - o[a]) * inv[a];
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            } else if o[a] < lo[a] || o[a] > hi[a] {
+                return Plan::Miss;
+            }
+        }
+        if !(t0 <= t1) {
+            return Plan::Miss;
+        }
+        Plan::Walk(Line {
+            org: o,
+            dir: d,
+            inv,
+            t0,
+            t1,
+            early_exit,
+        })
+    }
+}
+
+/// The DDA's state per axis (a fourth, unused slot lets an index `& 3` go unchecked). A moving axis
+/// crosses the plane `lo + k·size` next, at `t_next = (lo + k·size − org)·inv`: computed from the
+/// plane's position each time, so no error accumulates (docs/design.md bounds it), and never NaN
+/// (a finite difference times a finite inverse; `lo − org` times `inv` and `size·inv` apart could
+/// each overflow, and their sum be ∞ − ∞). It may cross planes until `k` reaches `k_end` (the
+/// box's face); a non-moving axis has `t_next = ∞` and `k = k_end`.
+struct Axes {
+    t_next: [f32; 4],
+    /// The next plane's index (exact: f32 would stop counting at 2^24 planes, and a grid may have
+    /// more on one axis).
+    k: [u32; 4],
+    k_end: [u32; 4],
+    /// +1 or −1 (as a wrapping add).
+    step: [u32; 4],
+    /// The flat index's change per step.
+    delta: [usize; 4],
+    lo: [f32; 4],
+    size: [f32; 4],
+    org: [f32; 4],
+    inv: [f32; 4],
+}
+
+impl Axes {
+    /// The t of the plane `k` on `axis` (`k` rounded to f32 above 2^24, a whole cell at most:
+    /// such an axis has cells below `u·E` wide, far inside the margin's `16u·E`).
+    #[inline(always)]
+    fn plane_t(&self, axis: usize, k: u32) -> f32 {
+        (self.lo[axis] + k as f32 * self.size[axis] - self.org[axis]) * self.inv[axis]
+    }
+}
+
+impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
+    type Output = Hit;
+
+    #[inline(always)]
+    fn run<T: TriangleTest>(self, test: T) -> Hit {
+        let Walk { grid, mesh, work } = self;
+        let mut best = Hit::MISS;
+        if grid.offsets.is_empty() {
+            return best;
+        }
+        let line = match Line::of(grid, test.ray()) {
+            Plan::Walk(line) => line,
+            Plan::Miss => return best,
+            Plan::TestAll => return test_all::<T, ANY>(&test, mesh),
+        };
+        let mut mailbox = Mailbox::new();
+        let shape = &grid.shape;
+        let t_start = line.t0.clamp(-f32::MAX, f32::MAX);
+        let mut axes = Axes {
+            t_next: [f32::INFINITY; 4],
+            k: [0; 4],
+            k_end: [0; 4],
+            step: [0; 4],
+            delta: [0; 4],
+            lo: [0.0; 4],
+            size: [0.0; 4],
+            org: [0.0; 4],
+            inv: [0.0; 4],
+        };
+        let mut index = 0usize;
+        let mut stride = 1usize;
+        for a in 0..3 {
+            let res = shape.res[a];
+            // The cell of the entry point, in f64 so that the index keeps its accuracy on grids of
+            // many cells (an f32 inverse cell size is off by 2^-23 relative, a whole cell at 2^23
+            // cells); truncation is floor for non-negative values and the rest clamps to 0
+            // either way (NaN too).
+            let p = line.org[a] + t_start * line.dir[a];
+            let f = (f64::from(p) - f64::from(shape.bounds.min[a])) * grid.inv_cell64[a];
+            let cell = if f >= 0.0 { (f as u32).min(res - 1) } else { 0 };
+            index += cell as usize * stride;
+            let inv = line.inv[a];
+            let up = line.dir[a] > 0.0;
+            if inv.is_finite() {
+                axes.k[a] = cell + u32::from(up);
+                axes.k_end[a] = if up { res } else { 0 };
+                axes.step[a] = if up { 1 } else { u32::MAX };
+                axes.delta[a] = if up { stride } else { stride.wrapping_neg() };
+                axes.lo[a] = shape.bounds.min[a];
+                axes.size[a] = shape.cell_size[a];
+                axes.org[a] = line.org[a];
+                axes.inv[a] = inv;
+                axes.t_next[a] = axes.plane_t(a, axes.k[a]);
+            }
+            stride *= res as usize;
+        }
+        // The walk ends at the first cell whose exit `t_axis` reaches `t_stop`: past the window
+        // (`t_axis > t1`, i.e. `t_axis ≥ next_up(t1)`), or, with the early exit, at or past the
+        // best hit (a triangle not yet tested lies beyond the current cell by the insertion margin,
+        // so a hit before the cell's exit cannot be beaten). `no_exit` keeps `t_stop` at the
+        // window's end when the early exit is off (`max(best.t, ∞) = ∞`).
+        let mut t_stop = next_up(line.t1);
+        let no_exit = if line.early_exit {
+            f32::NEG_INFINITY
+        } else {
+            f32::INFINITY
+        };
+        loop {
+            // The axis whose boundary comes first (ties to the lower axis), without branches. A
+            // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
+            let (tx, ty, tz) = (axes.t_next[0], axes.t_next[1], axes.t_next[2]);
+            let not_x = !((tx <= ty) & (tx <= tz));
+            let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
+            let t_axis = axes.t_next[axis];
+            if COUNT {
+                work.cells += 1;
+                work.tests += grid.listed(index);
+            }
+            let span = grid.span(index);
+            if span.0 != span.1 {
+                if let Some(h) =
+                    grid.test_span::<T, ANY>(&test, mesh, span, &mut best, &mut mailbox)
+                {
+                    return h;
+                }
+                t_stop = t_stop.min(best.t.max(no_exit));
+            }
+            if t_axis >= t_stop {
+                return best;
+            }
+            if axes.k[axis] == axes.k_end[axis] {
+                return best;
+            }
+            // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
+            // cell's far plane on that side and stops at the box's face.
+            index = index.wrapping_add(axes.delta[axis]);
+            let k = axes.k[axis].wrapping_add(axes.step[axis]);
+            axes.k[axis] = k;
+            axes.t_next[axis] = axes.plane_t(axis, k);
+            debug_assert!(index < grid.cell_count());
+        }
+    }
+}
+
+/// The smallest f32 above `x` (`x` itself for NaN and +∞).
+fn next_up(x: f32) -> f32 {
+    if x.is_nan() || x == f32::INFINITY {
+        x
+    } else if x == 0.0 {
+        f32::from_bits(1)
+    } else if x > 0.0 {
+        f32::from_bits(x.to_bits() + 1)
+    } else {
+        f32::from_bits(x.to_bits() - 1)
+    }
+}
+
+/// `d` times the power of two that brings its largest component `largest` (finite, not zero) into
+/// `[1, 2)`: the same line, with a direction whose t keeps f32's precision. In two steps, so each
+/// factor is a normal f32.
+fn unit_scaled(d: Vec3, largest: f32) -> Vec3 {
+    let e = ((largest.to_bits() >> 23) & 0xff) as i32;
+    // A subnormal largest component (biased exponent 0) needs the factor for 2^-126 and more.
+    let k = 127 - e.max(1) + if e == 0 { 23 } else { 0 };
+    let (k1, k2) = (k / 2, k - k / 2);
+    let pow2 = |k: i32| f32::from_bits(((k + 127) as u32) << 23);
+    d * pow2(k1) * pow2(k2)
+}
+
+/// Where the line `o + t·d` enters the box `[lo, hi]`, computed in f64 and rounded to f32, or
+/// `None` when the line misses the box. For origins at most 2^40 cells away the f64 error is below
+/// 1/2048 of a cell, less than the box's padding, so a line that meets a triangle is never refused.
+fn entry_point(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<Vec3> {
+    let (mut enter, mut leave) = (f64::NEG_INFINITY, f64::INFINITY);
+    for a in 0..3 {
+        let (oa, da) = (f64::from(o[a]), f64::from(d[a]));
+        if da == 0.0 {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+            continue;
+        }
+        let ta = (f64::from(lo[a]) - oa) / da;
+        let tb = (f64::from(hi[a]) - oa) / da;
+        enter = enter.max(ta.min(tb));
+        leave = leave.min(ta.max(tb));
+    }
+    if !(enter <= leave) {
+        return None;
+    }
+    let p = |a: usize| (f64::from(o[a]) + enter * f64::from(d[a])) as f32;
+    Some(Vec3::new(p(0), p(1), p(2)))
+}
