@@ -50,6 +50,9 @@ const BINS: usize = 32;
 /// at once (pbrt).
 const SMALL_NODE: usize = 16;
 
+/// Nodes of more than this many triangles are not made leaves by the automatic depth limit.
+const DEEP_NODE: usize = 48;
+
 /// Bad refines allowed on a path from the root (pbrt, Mitsuba).
 const MAX_BAD_REFINES: u32 = 3;
 
@@ -353,11 +356,17 @@ pub(super) fn build(
 impl Builder<'_> {
     /// The root's items (the lower side of depth 0): every non-degenerate triangle with its bounds.
     fn root_items(&mut self, live: usize) -> Result<(), BuildError> {
+        // Room for the deepest level a node may reach (see `node`: past the automatic limit).
+        let deepest = if self.params.max_depth == 0 {
+            MAX_DEPTH
+        } else {
+            self.max_depth
+        };
         self.levels = self
             .budget
-            .vec(self.max_depth as usize + 2, "kd-tree build levels")?;
+            .vec(deepest as usize + 2, "kd-tree build levels")?;
         self.levels
-            .resize_with(self.max_depth as usize + 2, Default::default);
+            .resize_with(deepest as usize + 2, Default::default);
         let mut items = self.budget.vec(live, "kd-tree build triangles")?;
         for (i, tri) in self.mesh.triangles().iter().enumerate() {
             if self.mesh.is_degenerate(i as u32) {
@@ -397,7 +406,14 @@ impl Builder<'_> {
         let n = self.items(depth, side).len();
         self.depth = self.depth.max(depth);
         let leaf_cost = self.costs.leaf(n);
-        let split = if depth >= self.max_depth || n <= self.params.max_leaf_prims as usize {
+        // The automatic limit is a safety net for the SAH, not a leaf size: a node of more than a few
+        // dozen triangles there may go on to MAX_DEPTH (a caller's explicit limit holds).
+        let limit = if self.params.max_depth == 0 && n > DEEP_NODE {
+            MAX_DEPTH
+        } else {
+            self.max_depth
+        };
+        let split = if depth >= limit || n <= self.params.max_leaf_prims as usize {
             None
         } else if n > self.params.exact_below as usize {
             self.binned_split(self.items(depth, side), &bbox)
