@@ -417,4 +417,37 @@ static inline rq_scene *test_build(const test_mesh *m, int structure) {
   return s == RQ_STATUS_OK ? scene : NULL;
 }
 
+/* The built-in calibration blob with its eight constants replaced by `values` (in the order of the
+ * blob format) and its CRC-32 recomputed; NULL (and a failure reported) if that is refused. Free with
+ * rq_calibration_free. */
+static inline rq_calibration *test_calibration(const double values[8]) {
+  unsigned char blob[512];
+  size_t len = 0;
+  CHECK_STATUS(rq_calibration_to_bytes(rq_calibration_builtin(), blob, sizeof blob, &len), RQ_STATUS_OK);
+  if (len < 36 + 8 * 8 + 4) {
+    return NULL;
+  }
+  for (int i = 0; i < 8; i++) {
+    uint64_t bits;
+    memcpy(&bits, &values[i], 8);
+    for (int b = 0; b < 8; b++) {
+      blob[36 + 8 * i + b] = (unsigned char)(bits >> (8 * b)); /* little-endian, as the format says */
+    }
+  }
+  uint32_t crc = 0xFFFFFFFFu;
+  for (size_t i = 0; i + 4 < len; i++) {
+    crc ^= blob[i];
+    for (int k = 0; k < 8; k++) {
+      crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+    }
+  }
+  crc = ~crc;
+  for (int b = 0; b < 4; b++) {
+    blob[len - 4 + b] = (unsigned char)(crc >> (8 * b));
+  }
+  rq_calibration *calib = NULL;
+  CHECK_STATUS(rq_calibration_from_bytes(blob, len, &calib), RQ_STATUS_OK);
+  return calib;
+}
+
 #endif /* RQ_TEST_COMMON_H */

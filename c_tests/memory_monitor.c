@@ -133,37 +133,11 @@ static void each_mode(void) {
 }
 
 /* A calibration whose estimates always favour the kd-tree (the grid costs 1 µs a ray, the kd-tree 1 ns
- * and almost nothing to build) and whose check prices triangle tests far above steps: the built-in
- * blob with its constants replaced and its CRC-32 recomputed. Free with rq_calibration_free. */
+ * and almost nothing to build) and whose check prices triangle tests far above steps. Free with
+ * rq_calibration_free. */
 static rq_calibration *calibration_favouring_the_kd_tree(void) {
   static const double values[8] = {10.0, 1000.0, 1.0, 100.0, 0.001, 1.0, 0.0, 1.0};
-  unsigned char blob[512];
-  size_t len = 0;
-  CHECK_STATUS(rq_calibration_to_bytes(rq_calibration_builtin(), blob, sizeof blob, &len), RQ_STATUS_OK);
-  if (len < 36 + 8 * 8 + 4) {
-    return NULL;
-  }
-  for (int i = 0; i < 8; i++) {
-    uint64_t bits;
-    memcpy(&bits, &values[i], 8);
-    for (int b = 0; b < 8; b++) {
-      blob[36 + 8 * i + b] = (unsigned char)(bits >> (8 * b)); /* little-endian, as the format says */
-    }
-  }
-  uint32_t crc = 0xFFFFFFFFu;
-  for (size_t i = 0; i + 4 < len; i++) {
-    crc ^= blob[i];
-    for (int k = 0; k < 8; k++) {
-      crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-    }
-  }
-  crc = ~crc;
-  for (int b = 0; b < 4; b++) {
-    blob[len - 4 + b] = (unsigned char)(crc >> (8 * b));
-  }
-  rq_calibration *calib = NULL;
-  CHECK_STATUS(rq_calibration_from_bytes(blob, len, &calib), RQ_STATUS_OK);
-  return calib;
+  return test_calibration(values);
 }
 
 /* The switch inside rq_scene_update asks the monitor the scene was built with. */

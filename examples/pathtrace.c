@@ -669,14 +669,14 @@ int main(int argc, char **argv) {
       goto done;
     }
     total_rays += pass_rays;
-    /* A known or forced budget has nothing left to decide; after the last pass a switch could only
-     * waste a kd-tree build (rays_remaining = 0 means "unknown", not "none", so we must not ask). */
-    if (a.budget != BUDGET_UNKNOWN || pass + 1 == a.spp) {
+    /* A known or forced budget has nothing left to decide. After the last pass no rays remain, and
+     * saying so (rather than 0, "unknown") keeps the scene from building a kd-tree no ray would use. */
+    if (a.budget != BUDGET_UNKNOWN) {
       continue;
     }
     rq_outcome before = rep.outcome;
     double u0 = now_seconds();
-    s = rq_scene_update(r.scene, pass_rays, 0);
+    s = rq_scene_update(r.scene, pass_rays, pass + 1 == a.spp ? RQ_RAYS_REMAINING_NONE : 0);
     double u = now_seconds() - u0;
     update_seconds += u;
     if (s != RQ_STATUS_OK) {

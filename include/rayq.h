@@ -16,6 +16,10 @@
 // The primitive id of a miss.
 #define RQ_INVALID_ID UINT32_MAX
 
+// `rays_remaining` for `rq_scene_update` when no rays remain (the last batch was traced): the scene
+// never switches again. (`0` means "unknown".)
+#define RQ_RAYS_REMAINING_NONE UINT64_MAX
+
 // Status of every fallible call (`uint32_t`).
 enum rq_status
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
@@ -89,6 +93,27 @@ enum rq_structure
 typedef enum rq_structure rq_structure;
 #else
 typedef uint32_t rq_structure;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+// What `rq_build_options.expected_rays` means when it is not 0 (`uint32_t`).
+enum rq_budget_kind
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // The rays the caller will trace (default): the selector decides once, at the build.
+  RQ_BUDGET_EXPECTED = 0,
+  // An upper bound (a renderer that may stop early): below the estimated break-even the grid is
+  // kept for good; above it the scene starts on the grid and `rq_scene_update` switches as with
+  // an unknown budget, but never once the rays that may still come are fewer than W*.
+  RQ_BUDGET_AT_MOST = 1,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum rq_budget_kind rq_budget_kind;
+#else
+typedef uint32_t rq_budget_kind;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
@@ -310,6 +335,8 @@ typedef struct rq_build_options {
   rq_memory_monitor_fn memory_monitor;
   // Passed to `memory_monitor`.
   void *memory_monitor_user;
+  // Whether `expected_rays` is the count (EXPECTED, default) or an upper bound (AT_MOST).
+  rq_budget_kind budget_kind;
 } rq_build_options;
 
 #if defined(RQ_WITH_OBJ)
@@ -645,11 +672,13 @@ rq_status rq_scene_intersect_n(const struct rq_scene *scene,
 // `scene` is NULL or a live handle; `out` NULL or writable for `out->struct_size` bytes.
 rq_status rq_scene_report_get(const struct rq_scene *scene, struct rq_scene_report *out);
 
-// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown).
-// Call between batches, never concurrently with queries. A scene built with AUTO and an unknown
-// budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
-// estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
-// estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
+// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown,
+// `RQ_RAYS_REMAINING_NONE` = none: the scene never switches again). Call between batches, never
+// concurrently with queries. A scene built with AUTO and an unknown budget (or an AT_MOST bound
+// above W*) that is still on the grid switches to the kd-tree when `rays_remaining` is at least
+// the estimated W*, or, with the budget unknown, once the time lost on the grid reaches the
+// kd-tree's estimated build time and, under an AT_MOST bound, the rays that may still come are at
+// least W* (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
 // held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
 // build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
 // unchanged and usable.

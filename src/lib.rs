@@ -49,7 +49,7 @@ pub use budget::MemoryBudget;
 pub use error::{BuildError, CalibError, MeshError};
 pub use mesh::TriMesh;
 pub use ray::{Aabb, Hit, Ray};
-pub use scene::{BuildOptions, Scene, Structure};
+pub use scene::{BudgetKind, BuildOptions, Scene, Structure, RAYS_REMAINING_NONE};
 pub use select::calibration::Calibration;
 pub use triangle::packs::TriangleLayout;
 

@@ -30,6 +30,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 
 /// The programs in `c_tests/` that are linked and run, each by its own `#[test]` below.
 const RUN_TESTS: &[&str] = &[
+    "budget",
     "calibration",
     "embedded",
     "geometries",
@@ -359,6 +360,11 @@ fn c_geometries() {
 #[test]
 fn c_hostile_mesh() {
     run_c_test("hostile_mesh");
+}
+
+#[test]
+fn c_budget() {
+    run_c_test("budget");
 }
 
 #[test]

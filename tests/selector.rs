@@ -6,7 +6,7 @@ mod common;
 use common::{bundled, mesh_of, reference_hits, test_rays};
 use rayq::scene::Outcome;
 use rayq::select::calibration::Calibration;
-use rayq::{BuildError, BuildOptions, Scene, Structure};
+use rayq::{BudgetKind, BuildError, BuildOptions, Scene, Structure, RAYS_REMAINING_NONE};
 
 /// A calibration in which the kd-tree costs `kd_ray` ns per ray and `build` ns per N log2 N, and the
 /// grid 1 µs per ray plus 1 ns per cell and per test (which the check after a kd-tree build prices
@@ -136,6 +136,91 @@ fn a_known_remaining_budget_re_decides() {
     assert_eq!(scene.report().outcome, Outcome::OnlineOnGrid);
     scene.update(10, w.ceil() as u64).unwrap();
     assert_eq!(scene.report().outcome, Outcome::OnlineSwitched);
+}
+
+fn at_most(bound: u64) -> BuildOptions {
+    BuildOptions {
+        budget_kind: BudgetKind::AtMost,
+        ..auto(bound)
+    }
+}
+
+/// A calibration whose W* on the teapot (~7·10⁵) is far above the budget from which the library
+/// makes its full set of sample rays (128 per camera sample, 24² of them), so that every bound
+/// below sees the same estimate.
+fn dear_build() -> Calibration {
+    calibration(100.0, 10_000.0)
+}
+
+fn break_even_of_dear_build() -> u64 {
+    let w = Scene::build(&bundled("teapot").as_source(), &auto(0), &dear_build())
+        .unwrap()
+        .report()
+        .break_even_rays;
+    assert!(w.is_finite() && w > 4.0 * 128.0 * 24.0 * 24.0, "{w}");
+    w.ceil() as u64
+}
+
+#[test]
+fn an_upper_bound_below_the_break_even_keeps_the_grid_for_good() {
+    let data = bundled("teapot");
+    let due = break_even_of_dear_build();
+    let mut scene = Scene::build(&data.as_source(), &at_most(due / 2), &dear_build()).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::BelowBreakEven);
+    // Even traced past W* (the caller's bound was wrong), the scene does not build on its own.
+    scene.update(due * 2, 0).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::BelowBreakEven)
+    );
+}
+
+#[test]
+fn an_upper_bound_above_the_break_even_switches_only_while_it_can_pay() {
+    let data = bundled("teapot");
+    let c = dear_build();
+    let due = break_even_of_dear_build();
+    // At most 2·W*: at the W*-th ray W* may still come, so it switches as the unknown rule does.
+    let mut roomy = Scene::build(&data.as_source(), &at_most(2 * due), &c).unwrap();
+    assert_eq!(roomy.report().break_even_rays.ceil() as u64, due);
+    assert_eq!(roomy.report().outcome, Outcome::OnlineOnGrid);
+    roomy.update(due - 1, 0).unwrap();
+    assert_eq!(roomy.report().outcome, Outcome::OnlineOnGrid);
+    roomy.update(1, 0).unwrap();
+    assert_eq!(roomy.report().outcome, Outcome::OnlineSwitched);
+    // At most W* + W*/2: at the W*-th ray fewer than W* may come; switching could not pay back.
+    let mut tight = Scene::build(&data.as_source(), &at_most(due + due / 2), &c).unwrap();
+    assert_eq!(tight.report().outcome, Outcome::OnlineOnGrid);
+    tight.update(due, 0).unwrap();
+    let r = tight.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::OnlineOnGrid)
+    );
+    // A known remaining budget still re-decides under a bound.
+    tight.update(0, due).unwrap();
+    assert_eq!(tight.report().outcome, Outcome::OnlineSwitched);
+}
+
+#[test]
+fn no_rays_remaining_ends_the_online_rule() {
+    let data = bundled("teapot");
+    let c = calibration(100.0, 10.0);
+    let mut scene = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    let w = scene.report().break_even_rays;
+    // The last batch takes the count past W*: without more rays to come, building cannot pay.
+    scene
+        .update(w.ceil() as u64 + 1, RAYS_REMAINING_NONE)
+        .unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::OnlineOnGrid)
+    );
+    assert_eq!(scene.rays_traced(), w.ceil() as u64 + 1);
+    scene.update(u64::MAX / 2, 0).unwrap();
+    assert_eq!(scene.report().structure, Structure::Grid);
 }
 
 #[test]

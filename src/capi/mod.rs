@@ -51,6 +51,12 @@ pub const RQ_ABI_VERSION: u32 = 1;
 /// The primitive id of a miss.
 pub const RQ_INVALID_ID: u32 = u32::MAX;
 
+/// `rays_remaining` for `rq_scene_update` when no rays remain (the last batch was traced): the scene
+/// never switches again. (`0` means "unknown".)
+pub const RQ_RAYS_REMAINING_NONE: u64 = u64::MAX;
+// Spelt out above so that cbindgen can write it; the Rust API's value is the same by construction.
+const _: () = assert!(RQ_RAYS_REMAINING_NONE == crate::scene::RAYS_REMAINING_NONE);
+
 /// What a function's return type gives when the body panics (std builds catch the panic).
 trait PanicValue {
     // Without std nothing is caught, so nothing asks for the value.

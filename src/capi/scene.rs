@@ -11,7 +11,7 @@ use crate::budget::{try_box, MemoryMonitor};
 use crate::error::{BuildError, MeshError};
 use crate::mesh::MeshSource;
 use crate::ray::{Hit, Ray};
-use crate::scene::{BuildOptions, Outcome, Scene, Structure};
+use crate::scene::{BudgetKind, BuildOptions, Outcome, Scene, Structure};
 use crate::select::calibration::Calibration;
 use crate::select::sample::RaySource;
 
@@ -39,6 +39,7 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
                 user: ptr::null_mut(),
                 memory_monitor: None,
                 memory_monitor_user: ptr::null_mut(),
+                budget_kind: rq_budget_kind::RQ_BUDGET_EXPECTED,
             })
         }
     })
@@ -48,6 +49,7 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
 struct Options {
     structure: Structure,
     expected_rays: u64,
+    budget_kind: BudgetKind,
     memory_limit: usize,
     sample_rays: *const rq_ray,
     sample_ray_count: usize,
@@ -73,6 +75,7 @@ unsafe fn read_options(
     let mut o = Options {
         structure: Structure::Auto,
         expected_rays: 0,
+        budget_kind: BudgetKind::Expected,
         memory_limit: 0,
         sample_rays: ptr::null(),
         sample_ray_count: 0,
@@ -108,6 +111,18 @@ unsafe fn read_options(
         }
     };
     o.expected_rays = read_covered!(p, size, expected_rays, u64, 0);
+    let budget_kind: u32 = read_covered!(p, size, budget_kind, u32, 0);
+    o.budget_kind = match budget_kind {
+        0 => BudgetKind::Expected,
+        1 => BudgetKind::AtMost,
+        _ => {
+            return Err((
+                rq_status::RQ_STATUS_INVALID_ARGUMENT,
+                "rq_build_options.budget_kind is not an rq_budget_kind value",
+                o,
+            ))
+        }
+    };
     o.memory_limit = read_covered!(p, size, memory_limit, usize, 0);
     o.sample_rays = read_covered!(p, size, sample_rays, *const rq_ray, ptr::null());
     o.sample_ray_count = read_covered!(p, size, sample_ray_count, usize, 0);
@@ -317,6 +332,7 @@ pub(super) unsafe fn build_scene(
     let options = BuildOptions {
         structure: o.structure,
         expected_rays: o.expected_rays,
+        budget_kind: o.budget_kind,
         memory_limit: o.memory_limit,
         memory_monitor: o.memory_monitor,
         ..BuildOptions::DEFAULT
@@ -544,11 +560,13 @@ pub unsafe extern "C" fn rq_scene_report_get(
     })
 }
 
-/// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown).
-/// Call between batches, never concurrently with queries. A scene built with AUTO and an unknown
-/// budget that is still on the grid switches to the kd-tree when `rays_remaining` is at least the
-/// estimated W*, or, with the budget unknown, once the time lost on the grid reaches the kd-tree's
-/// estimated build time (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
+/// Tells the scene how many rays were traced since the last call and how many remain (0 = unknown,
+/// `RQ_RAYS_REMAINING_NONE` = none: the scene never switches again). Call between batches, never
+/// concurrently with queries. A scene built with AUTO and an unknown budget (or an AT_MOST bound
+/// above W*) that is still on the grid switches to the kd-tree when `rays_remaining` is at least
+/// the estimated W*, or, with the budget unknown, once the time lost on the grid reaches the
+/// kd-tree's estimated build time and, under an AT_MOST bound, the rays that may still come are at
+/// least W* (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
 /// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
 /// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
 /// unchanged and usable.

@@ -60,6 +60,18 @@ pub enum rq_structure {
     RQ_STRUCTURE_KDTREE = 2,
 }
 
+/// What `rq_build_options.expected_rays` means when it is not 0 (`uint32_t`).
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_budget_kind {
+    /// The rays the caller will trace (default): the selector decides once, at the build.
+    RQ_BUDGET_EXPECTED = 0,
+    /// An upper bound (a renderer that may stop early): below the estimated break-even the grid is
+    /// kept for good; above it the scene starts on the grid and `rq_scene_update` switches as with
+    /// an unknown budget, but never once the rays that may still come are fewer than W*.
+    RQ_BUDGET_AT_MOST = 1,
+}
+
 /// Why the scene uses its structure (`uint32_t`).
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -156,6 +168,8 @@ pub struct rq_build_options {
     pub memory_monitor: rq_memory_monitor_fn,
     /// Passed to `memory_monitor`.
     pub memory_monitor_user: *mut c_void,
+    /// Whether `expected_rays` is the count (EXPECTED, default) or an upper bound (AT_MOST).
+    pub budget_kind: rq_budget_kind,
 }
 
 /// Memory monitor: told the bytes a build would hold after the allocation it is about to make;

@@ -1,7 +1,7 @@
 //! The selection: which structure a scene builds over its validated mesh, and why (used by the
 //! build and again when vertices move).
 
-use super::{Accel, BuildOptions, Outcome, Structure};
+use super::{Accel, BudgetKind, BuildOptions, Outcome, Structure};
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
@@ -59,11 +59,18 @@ pub(super) fn choose(
     let estimate = calibration.estimate(&features);
     let mut outcome = match options.expected_rays {
         0 => Outcome::OnlineOnGrid,
-        budget_rays => match estimate.decide(budget_rays) {
-            Decision::GridFasterPerRay => Outcome::GridFasterPerRay,
-            Decision::BelowBreakEven => Outcome::BelowBreakEven,
-            Decision::AboveBreakEven => Outcome::AboveBreakEven,
+        budget_rays => match (estimate.decide(budget_rays), options.budget_kind) {
+            (Decision::GridFasterPerRay, _) => Outcome::GridFasterPerRay,
+            (Decision::BelowBreakEven, _) => Outcome::BelowBreakEven,
+            (Decision::AboveBreakEven, BudgetKind::Expected) => Outcome::AboveBreakEven,
+            // An upper bound above W* may still end below it: pay for the kd-tree only once the
+            // rays traced say so.
+            (Decision::AboveBreakEven, BudgetKind::AtMost) => Outcome::OnlineOnGrid,
         },
+    };
+    let max_rays = match (options.expected_rays, options.budget_kind) {
+        (0, _) | (_, BudgetKind::Expected) => u64::MAX,
+        (bound, BudgetKind::AtMost) => bound,
     };
     if outcome == Outcome::AboveBreakEven {
         // The grid goes first, so the limit need hold only the mesh and the kd-tree.
@@ -84,7 +91,8 @@ pub(super) fn choose(
         accel,
         outcome,
         estimate: Some(estimate),
-        online: (outcome == Outcome::OnlineOnGrid).then(|| OnlineSwitch::new(estimate)),
+        online: (outcome == Outcome::OnlineOnGrid)
+            .then(|| OnlineSwitch::at_most(estimate, max_rays)),
         grid_samples: samples.is_none().then_some(features),
     })
 }

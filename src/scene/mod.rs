@@ -47,6 +47,23 @@ pub enum Outcome {
     OnlineSwitched,
 }
 
+/// What [`BuildOptions::expected_rays`] means when it is not 0.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum BudgetKind {
+    /// The rays the caller will trace (default): the selector decides once, at the build.
+    #[default]
+    Expected,
+    /// An upper bound (a renderer that may stop early, adaptive sampling): below the estimated
+    /// break-even the grid is kept for good; above it the scene starts on the grid and switches as
+    /// with an unknown budget, but never once the rays that may still come are fewer than W*.
+    AtMost,
+}
+
+/// Say this as `rays_remaining` to [`Scene::update`] when no rays remain (the last batch was
+/// traced, or the next one is the last and its size is not worth telling): the scene never
+/// switches again. `0` means "unknown" instead.
+pub const RAYS_REMAINING_NONE: u64 = u64::MAX;
+
 /// How to build a scene. `BuildOptions::DEFAULT` documents every default.
 #[derive(Clone, Copy, Debug)]
 pub struct BuildOptions {
@@ -54,6 +71,8 @@ pub struct BuildOptions {
     pub structure: Structure,
     /// Rays the caller expects to trace; 0 = unknown (default).
     pub expected_rays: u64,
+    /// Whether `expected_rays` is the count or an upper bound; default [`BudgetKind::Expected`].
+    pub budget_kind: BudgetKind,
     /// Memory limit in bytes for everything the scene holds during and after the build; 0 = none.
     pub memory_limit: usize,
     /// Grid parameters; default [`GridParams::DEFAULT`].
@@ -72,6 +91,7 @@ impl BuildOptions {
     pub const DEFAULT: BuildOptions = BuildOptions {
         structure: Structure::Auto,
         expected_rays: 0,
+        budget_kind: BudgetKind::Expected,
         memory_limit: 0,
         grid: GridParams::DEFAULT,
         kdtree: KdTreeParams::DEFAULT,
@@ -444,13 +464,19 @@ impl Scene {
     }
 
     /// Between batches (never during queries): `rays_traced` since the last call and
-    /// `rays_remaining` still expected (0 = unknown). A scene built with `Auto` and an unknown budget
-    /// that is still on the grid switches to the kd-tree when the remaining budget is at least W*,
-    /// or, with the budget still unknown, once the excess paid on the grid reaches the kd-tree's
-    /// build cost. The kd-tree is built while the grid is still held (the memory limit must hold
-    /// both); if that fails the scene stays on the grid, unchanged, and the error is returned.
+    /// `rays_remaining` still expected (0 = unknown, [`RAYS_REMAINING_NONE`] = none). A scene built
+    /// with `Auto` and an unknown budget (or an upper bound above W*) that is still on the grid
+    /// switches to the kd-tree when the remaining budget is at least W*, or, with the budget still
+    /// unknown, once the excess paid on the grid reaches the kd-tree's build cost (and, under an
+    /// upper bound, the rays that may still come are at least W*). After [`RAYS_REMAINING_NONE`]
+    /// it never switches. The kd-tree is built while the grid is still held (the memory limit must
+    /// hold both); if that fails the scene stays on the grid, unchanged, and the error is returned.
     pub fn update(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
+        if rays_remaining == RAYS_REMAINING_NONE {
+            self.online = None;
+            return Ok(());
+        }
         let Some(rule) = self.online.as_mut() else {
             return Ok(());
         };

@@ -108,19 +108,47 @@ pub fn kd_tree_confirmed(
 /// switch at exactly W*, the total is never more than `(2 − t_kd/t_grid)×` the better of the two
 /// fixed choices made knowing the budget; switching at the end of a batch adds at most that batch's
 /// excess.
+///
+/// With an upper bound on the budget ([`OnlineSwitch::at_most`]) the rule also never switches when
+/// the rays that may still come are fewer than W*: then the kd-tree cannot pay back its build
+/// whatever the renderer does, and the bound only removes switches that lose.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct OnlineSwitch {
     estimate: CostEstimate,
     rays_on_grid: u64,
+    /// At most this many rays in all (`u64::MAX`: no bound).
+    max_rays: u64,
 }
 
 impl OnlineSwitch {
     /// A rule for a scene with these estimates and no rays traced yet.
     pub fn new(estimate: CostEstimate) -> Self {
+        Self::at_most(estimate, u64::MAX)
+    }
+
+    /// A rule for a scene that will trace at most `max_rays` rays in all.
+    pub fn at_most(estimate: CostEstimate, max_rays: u64) -> Self {
         OnlineSwitch {
             estimate,
             rays_on_grid: 0,
+            max_rays,
         }
+    }
+
+    /// The most rays that may still come (`u64::MAX` without a bound).
+    pub fn rays_that_may_remain(&self) -> u64 {
+        if self.max_rays == u64::MAX {
+            u64::MAX
+        } else {
+            self.max_rays.saturating_sub(self.rays_on_grid)
+        }
+    }
+
+    /// True when the rays that may still come could pay back the kd-tree's build (always without a
+    /// bound; never for estimates that cannot tell).
+    pub fn may_pay_back(&self) -> bool {
+        let w = self.estimate.break_even_rays();
+        w < f64::INFINITY && (self.max_rays == u64::MAX || self.rays_that_may_remain() as f64 >= w)
     }
 
     /// Rays traced on the grid so far.
@@ -144,11 +172,11 @@ impl OnlineSwitch {
         self.should_switch()
     }
 
-    /// True when the excess paid has reached the build cost (never for a kd-tree that is not
-    /// faster per ray, or for estimates that cannot tell).
+    /// True when the excess paid has reached the build cost and the rays that may still come could
+    /// pay it back (never for a kd-tree that is not faster per ray, or for estimates that cannot
+    /// tell).
     pub fn should_switch(&self) -> bool {
-        let w = self.estimate.break_even_rays();
-        w < f64::INFINITY && self.rays_on_grid as f64 >= w
+        self.may_pay_back() && self.rays_on_grid as f64 >= self.estimate.break_even_rays()
     }
 }
 
@@ -274,6 +302,44 @@ mod tests {
                     );
                 }
             }
+        }
+    }
+
+    #[test]
+    fn an_upper_bound_only_removes_switches_that_cannot_pay() {
+        let e = est(3.0, 1.0, 2000.0); // W* = 1000
+                                       // At most 1999 rays: after the 1000th only 999 may remain, fewer than W*.
+        let mut capped = OnlineSwitch::at_most(e, 1999);
+        assert!(capped.may_pay_back());
+        assert!(!capped.record(1000));
+        assert_eq!(capped.rays_that_may_remain(), 999);
+        assert!(!capped.may_pay_back());
+        // At most 2000: exactly W* may remain at the switch, which pays (ties build).
+        let mut enough = OnlineSwitch::at_most(e, 2000);
+        assert!(enough.record(1000));
+        // A bound below W* from the start: never.
+        assert!(!OnlineSwitch::at_most(e, 999).may_pay_back());
+        // Without a bound the rule is the plain one.
+        let mut plain = OnlineSwitch::new(e);
+        assert_eq!(plain.rays_that_may_remain(), u64::MAX);
+        assert!(plain.record(1000));
+        // Over any true total up to the bound, the capped rule never costs more than the plain one.
+        for total in [500u64, 1000, 1500, 1999] {
+            let cost = |rule: OnlineSwitch| {
+                let mut rule = rule;
+                let mut c = 0.0;
+                for done in 1..=total {
+                    c += e.grid_ray_seconds;
+                    if rule.record(1) {
+                        return c + e.kd_build_seconds + (total - done) as f64 * e.kd_ray_seconds;
+                    }
+                }
+                c
+            };
+            assert!(
+                cost(OnlineSwitch::at_most(e, 1999)) <= cost(OnlineSwitch::new(e)),
+                "{total}"
+            );
         }
     }
 
