@@ -63,17 +63,25 @@ static rq_scene_report report_of(const rq_scene *scene) {
   return r;
 }
 
+/* A calibration whose estimates always favour the kd-tree (the grid costs 1 µs a ray, the kd-tree 1 ns
+ * and almost nothing to build) and whose check prices triangle tests far above steps. Free with
+ * rq_calibration_free. */
+static rq_calibration *calibration_favouring_the_kd_tree(void) {
+  static const double values[8] = {10.0, 1000.0, 1.0, 100.0, 0.001, 1.0, 0.0, 1.0};
+  return test_calibration(values);
+}
+
 /* Builds with a monitor that allows everything and returns how many times it was asked. `want` is the
- * structure the scene must end on; RQ_STRUCTURE_AUTO accepts either. */
+ * structure the scene must end on; RQ_STRUCTURE_AUTO accepts either. `calib` NULL: the built-in. */
 static size_t calls_of_full_build(const rq_mesh_desc *d, rq_structure structure, uint64_t rays,
-                                  rq_structure want, const char *what) {
+                                  const rq_calibration *calib, rq_structure want, const char *what) {
   monitor m;
   errors e;
   memset(&m, 0, sizeof m);
   memset(&e, 0, sizeof e);
   rq_build_options o = options(structure, rays, &m, &e);
   rq_scene *scene = NULL;
-  CHECK_STATUS(rq_scene_build(d, &o, NULL, &scene), RQ_STATUS_OK);
+  CHECK_STATUS(rq_scene_build(d, &o, calib, &scene), RQ_STATUS_OK);
   if (!scene) {
     return 0;
   }
@@ -89,8 +97,8 @@ static size_t calls_of_full_build(const rq_mesh_desc *d, rq_structure structure,
 }
 
 /* Refusing call k, for every k the full build makes from `from` on, cancels the build. */
-static void refuse_each(const rq_mesh_desc *d, rq_structure structure, uint64_t rays, size_t from,
-                        size_t calls, const char *what) {
+static void refuse_each(const rq_mesh_desc *d, rq_structure structure, uint64_t rays,
+                        const rq_calibration *calib, size_t from, size_t calls, const char *what) {
   for (size_t k = from; k <= calls; k++) {
     monitor m;
     errors e;
@@ -99,7 +107,7 @@ static void refuse_each(const rq_mesh_desc *d, rq_structure structure, uint64_t 
     m.refuse_at = k;
     rq_build_options o = options(structure, rays, &m, &e);
     rq_scene *scene = (rq_scene *)test_sentinel();
-    rq_status s = rq_scene_build(d, &o, NULL, &scene);
+    rq_status s = rq_scene_build(d, &o, calib, &scene);
     CHECKF(s == RQ_STATUS_CANCELLED, "%s: refusing call %zu of %zu gave %u (%s)", what, k, calls, (unsigned)s,
            rq_status_str(s));
     CHECKF(scene == (rq_scene *)test_sentinel(), "%s: refusing call %zu wrote *out", what, k);
@@ -116,28 +124,23 @@ static void each_mode(void) {
   test_mesh m = mesh_soup(7, 400);
   rq_mesh_desc d = mesh_desc(&m);
 
-  size_t grid = calls_of_full_build(&d, RQ_STRUCTURE_GRID, 0, RQ_STRUCTURE_GRID, "grid");
-  refuse_each(&d, RQ_STRUCTURE_GRID, 0, 1, grid, "grid");
+  size_t grid = calls_of_full_build(&d, RQ_STRUCTURE_GRID, 0, NULL, RQ_STRUCTURE_GRID, "grid");
+  refuse_each(&d, RQ_STRUCTURE_GRID, 0, NULL, 1, grid, "grid");
 
-  size_t kd = calls_of_full_build(&d, RQ_STRUCTURE_KDTREE, 0, RQ_STRUCTURE_KDTREE, "kd-tree");
-  refuse_each(&d, RQ_STRUCTURE_KDTREE, 0, 1, kd, "kd-tree");
+  size_t kd = calls_of_full_build(&d, RQ_STRUCTURE_KDTREE, 0, NULL, RQ_STRUCTURE_KDTREE, "kd-tree");
+  refuse_each(&d, RQ_STRUCTURE_KDTREE, 0, NULL, 1, kd, "kd-tree");
 
-  /* AUTO with a huge budget builds the grid, decides for the kd-tree and builds it (and, where the
-   * kd-tree saves no work on the sample rays, as it may on a soup, builds the grid again): it asks
-   * more often than the grid alone, and refusing any call cancels the build. */
+  /* AUTO with a huge budget and a calibration that favours the kd-tree builds the grid, decides for
+   * the kd-tree and builds it (and, where the kd-tree saves no work on the sample rays, as it may on a
+   * soup, builds the grid again): it asks more often than the grid alone, and refusing any call
+   * cancels the build. */
   const uint64_t huge = 1000000000000ull;
-  size_t autokd = calls_of_full_build(&d, RQ_STRUCTURE_AUTO, huge, RQ_STRUCTURE_AUTO, "auto");
+  rq_calibration *favour_kd = calibration_favouring_the_kd_tree();
+  size_t autokd = calls_of_full_build(&d, RQ_STRUCTURE_AUTO, huge, favour_kd, RQ_STRUCTURE_AUTO, "auto");
   CHECKF(autokd > grid, "auto asked %zu times, the grid alone %zu", autokd, grid);
-  refuse_each(&d, RQ_STRUCTURE_AUTO, huge, 1, autokd, "auto");
+  refuse_each(&d, RQ_STRUCTURE_AUTO, huge, favour_kd, 1, autokd, "auto");
+  rq_calibration_free(favour_kd);
   mesh_free(&m);
-}
-
-/* A calibration whose estimates always favour the kd-tree (the grid costs 1 µs a ray, the kd-tree 1 ns
- * and almost nothing to build) and whose check prices triangle tests far above steps. Free with
- * rq_calibration_free. */
-static rq_calibration *calibration_favouring_the_kd_tree(void) {
-  static const double values[8] = {10.0, 1000.0, 1.0, 100.0, 0.001, 1.0, 0.0, 1.0};
-  return test_calibration(values);
 }
 
 /* The switch inside rq_scene_update asks the monitor the scene was built with. */
