@@ -16,14 +16,6 @@ static rq_calibration *dear_build(void) {
   return test_calibration(values);
 }
 
-static rq_scene_report report_of(const rq_scene *scene) {
-  rq_scene_report r;
-  memset(&r, 0, sizeof r);
-  r.struct_size = (uint32_t)sizeof r;
-  CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
-  return r;
-}
-
 static rq_scene *build(const rq_mesh_desc *d, const rq_calibration *calib, uint64_t rays, rq_budget_kind kind) {
   rq_build_options o;
   rq_build_options_init(&o);
@@ -36,7 +28,7 @@ static rq_scene *build(const rq_mesh_desc *d, const rq_calibration *calib, uint6
 }
 
 static int on(const rq_scene *scene, rq_structure structure, rq_outcome outcome) {
-  rq_scene_report r = report_of(scene);
+  rq_scene_report r = test_report(scene);
   return r.structure == structure && r.outcome == outcome;
 }
 
@@ -48,7 +40,7 @@ int main(void) {
   if (!calib || !probe) {
     return test_finish("budget");
   }
-  double w = report_of(probe).break_even_rays;
+  double w = test_report(probe).break_even_rays;
   rq_scene_free(probe);
   CHECKF(w > 4.0 * 128 * 24 * 24 && w < 1e12, "W* = %g", w);
   uint64_t due = (uint64_t)ceil(w);

@@ -417,6 +417,16 @@ static inline rq_scene *test_build(const test_mesh *m, int structure) {
   return s == RQ_STATUS_OK ? scene : NULL;
 }
 
+/* The scene's report, every field this header knows (the struct is pre-filled with 0xAB bytes, so a
+ * field the library failed to write shows up as garbage rather than as a plausible zero). */
+static inline rq_scene_report test_report(const rq_scene *scene) {
+  rq_scene_report r;
+  memset(&r, 0xAB, sizeof r);
+  r.struct_size = (uint32_t)sizeof r;
+  CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
+  return r;
+}
+
 /* The built-in calibration blob with its eight constants replaced by `values` (in the order of the
  * blob format) and its CRC-32 recomputed; NULL (and a failure reported) if that is refused. Free with
  * rq_calibration_free. */

@@ -55,14 +55,6 @@ static rq_build_options options(rq_structure structure, uint64_t expected_rays, 
   return o;
 }
 
-static rq_scene_report report_of(const rq_scene *scene) {
-  rq_scene_report r;
-  memset(&r, 0, sizeof r);
-  r.struct_size = (uint32_t)sizeof r;
-  CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
-  return r;
-}
-
 /* A calibration whose estimates always favour the kd-tree (the grid costs 1 µs a ray, the kd-tree 1 ns
  * and almost nothing to build) and whose check prices triangle tests far above steps. Free with
  * rq_calibration_free. */
@@ -85,7 +77,7 @@ static size_t calls_of_full_build(const rq_mesh_desc *d, rq_structure structure,
   if (!scene) {
     return 0;
   }
-  rq_scene_report r = report_of(scene);
+  rq_scene_report r = test_report(scene);
   CHECKF(want == RQ_STRUCTURE_AUTO || r.structure == want, "%s: structure %u", what, (unsigned)r.structure);
   CHECKF(m.calls > 0, "%s: the monitor was never asked", what);
   /* The totals it is told cover what the scene keeps. */
@@ -162,7 +154,7 @@ static void update_switch(void) {
     mesh_free(&mesh);
     return;
   }
-  rq_scene_report before = report_of(scene);
+  rq_scene_report before = test_report(scene);
   CHECK(before.structure == RQ_STRUCTURE_GRID && before.outcome == RQ_OUTCOME_ONLINE_ON_GRID);
   rq_ray ray = make_ray(0.1f, 0.2f, -5.0f, 0.01f, 0.02f, 1.0f);
   rq_hit h0 = trace(scene, &ray);
@@ -171,7 +163,7 @@ static void update_switch(void) {
   size_t calls = m.calls;
   CHECK_STATUS(rq_scene_update(scene, 1000000000000ull, 1000000000000ull), RQ_STATUS_CANCELLED);
   CHECKF(m.calls > calls, "the update did not ask the monitor (%zu calls)", m.calls);
-  rq_scene_report refused = report_of(scene);
+  rq_scene_report refused = test_report(scene);
   CHECK(refused.structure == RQ_STRUCTURE_GRID && refused.outcome == RQ_OUTCOME_ONLINE_ON_GRID);
   CHECK(refused.memory_bytes == before.memory_bytes);
   rq_hit h1 = trace(scene, &ray);
@@ -179,7 +171,7 @@ static void update_switch(void) {
 
   m.refuse_all = 0;
   CHECK_STATUS(rq_scene_update(scene, 1000000000000ull, 1000000000000ull), RQ_STATUS_OK);
-  rq_scene_report after = report_of(scene);
+  rq_scene_report after = test_report(scene);
   CHECK(after.structure == RQ_STRUCTURE_KDTREE && after.outcome == RQ_OUTCOME_ONLINE_SWITCHED);
   rq_hit h2 = trace(scene, &ray);
   CHECK(same_hit(&h0, &h2));

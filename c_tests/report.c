@@ -2,14 +2,6 @@
  * triangles, the grid's resolution, the memory held, the estimates, and the ray budget. */
 #include "common.h"
 
-static rq_scene_report get_report(const rq_scene *scene) {
-  rq_scene_report r;
-  memset(&r, 0xAB, sizeof r);
-  r.struct_size = (uint32_t)sizeof r;
-  CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
-  return r;
-}
-
 /* An estimate is NaN (not estimated) or a finite non-negative number. */
 static int estimate_ok(double x) { return isnan(x) || (isfinite(x) && x >= 0.0); }
 
@@ -52,7 +44,7 @@ static void test_grid_report(void) {
       mesh_free(&m);
       continue;
     }
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, m.nt, "grid");
     CHECK(r.structure == RQ_STRUCTURE_GRID);
     CHECK(r.outcome == RQ_OUTCOME_FORCED);
@@ -82,7 +74,7 @@ static void test_grid_report(void) {
     test_mesh m = mesh_plane(n);
     rq_scene *scene = test_build(&m, RQ_STRUCTURE_GRID);
     if (scene) {
-      rq_scene_report r = get_report(scene);
+      rq_scene_report r = test_report(scene);
       check_common(&r, m.nt, "plane");
       CHECKF(r.memory_bytes > prev, "plane %d: %zu bytes, smaller plane %zu", n, r.memory_bytes, prev);
       prev = r.memory_bytes;
@@ -110,7 +102,7 @@ static void test_auto_report(void) {
     if (!scene) {
       continue;
     }
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, m.nt, "auto");
     CHECKF(r.expected_rays == budgets[i], "budget %llu: report says %llu", (unsigned long long)budgets[i],
            (unsigned long long)r.expected_rays);
@@ -129,7 +121,7 @@ static void test_auto_report(void) {
     /* rq_scene_update between batches keeps the report coherent. */
     CHECK_STATUS(rq_scene_update(scene, 5000, 0), RQ_STATUS_OK);
     CHECK_STATUS(rq_scene_update(scene, 100000, 100000), RQ_STATUS_OK);
-    rq_scene_report after = get_report(scene);
+    rq_scene_report after = test_report(scene);
     check_common(&after, m.nt, "auto after update");
     if (after.structure == RQ_STRUCTURE_GRID) {
       CHECK(after.grid_resolution[0] > 0);
@@ -140,7 +132,7 @@ static void test_auto_report(void) {
   rq_scene *scene = NULL;
   CHECK_STATUS(rq_scene_build(&d, NULL, NULL, &scene), RQ_STATUS_OK);
   if (scene) {
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, m.nt, "defaults");
     CHECK(r.expected_rays == 0);
     CHECK(r.structure == RQ_STRUCTURE_GRID && r.outcome == RQ_OUTCOME_ONLINE_ON_GRID);
@@ -159,7 +151,7 @@ static void test_kdtree_report(void) {
   rq_status s = rq_scene_build(&d, &o, NULL, &scene);
   CHECKF(s == RQ_STATUS_OK, "kdtree: %u (%s)", (unsigned)s, rq_status_str(s));
   if (scene) {
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, m.nt, "kdtree");
     CHECK(r.structure == RQ_STRUCTURE_KDTREE && r.outcome == RQ_OUTCOME_FORCED);
     CHECK(r.memory_bytes > 0);
@@ -179,7 +171,7 @@ static void test_edge_meshes(void) {
   rq_scene *scene = NULL;
   CHECK_STATUS(rq_scene_build(&d, NULL, NULL, &scene), RQ_STATUS_OK);
   if (scene) {
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, 0, "empty");
     CHECK(r.references_per_triangle == 0.0 || isnan(r.references_per_triangle));
     rq_scene_free(scene);
@@ -191,7 +183,7 @@ static void test_edge_meshes(void) {
   scene = NULL;
   CHECK_STATUS(rq_scene_build(&dd, NULL, NULL, &scene), RQ_STATUS_OK);
   if (scene) {
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, 3, "degenerate");
     CHECK(r.references_per_triangle == 0.0 || isnan(r.references_per_triangle));
     rq_scene_free(scene);
@@ -202,7 +194,7 @@ static void test_edge_meshes(void) {
   mesh_triangle(&one, mesh_vertex(&one, 0, 0, 0), mesh_vertex(&one, 1, 0, 0), mesh_vertex(&one, 0, 1, 0));
   scene = test_build(&one, RQ_STRUCTURE_GRID);
   if (scene) {
-    rq_scene_report r = get_report(scene);
+    rq_scene_report r = test_report(scene);
     check_common(&r, 1, "one triangle");
     CHECK(r.grid_resolution[0] >= 1 && r.grid_resolution[1] >= 1 && r.grid_resolution[2] >= 1);
     CHECK(r.memory_bytes >= 3 * 12);
