@@ -331,6 +331,41 @@ static inline test_mesh mesh_cube(int n) {
   return m;
 }
 
+/* A Sierpinski tetrahedron: the tetrahedron of corners (1,1,1), (1,-1,-1), (-1,1,-1), (-1,-1,1)
+ * replaced by four half-size copies at its corners, `depth` times; each small tetrahedron is four
+ * triangles of its own four vertices (4^(depth+1) triangles). Mostly empty space around clusters:
+ * a scene on which the kd-tree saves work over the grid. */
+static inline void mesh_sierpinski(test_mesh *m, const float c[4][3], int depth) {
+  if (depth == 0) {
+    uint32_t v[4];
+    for (int i = 0; i < 4; i++) {
+      v[i] = mesh_vertex(m, c[i][0], c[i][1], c[i][2]);
+    }
+    mesh_triangle(m, v[0], v[1], v[2]);
+    mesh_triangle(m, v[0], v[1], v[3]);
+    mesh_triangle(m, v[0], v[2], v[3]);
+    mesh_triangle(m, v[1], v[2], v[3]);
+    return;
+  }
+  for (int k = 0; k < 4; k++) {
+    float h[4][3];
+    for (int i = 0; i < 4; i++) {
+      for (int a = 0; a < 3; a++) {
+        h[i][a] = 0.5f * (c[k][a] + c[i][a]);
+      }
+    }
+    mesh_sierpinski(m, (const float(*)[3])h, depth - 1);
+  }
+}
+
+static inline test_mesh mesh_tetra(int depth) {
+  static const float corners[4][3] = {{1, 1, 1}, {1, -1, -1}, {-1, 1, -1}, {-1, -1, 1}};
+  test_mesh m;
+  memset(&m, 0, sizeof m);
+  mesh_sierpinski(&m, corners, depth);
+  return m;
+}
+
 /* A flat n x n grid of unit quads in the plane z = 0, x and y in [0, n], shared vertices. */
 static inline test_mesh mesh_plane(int n) {
   test_mesh m;

@@ -137,9 +137,9 @@ static void each_mode(void) {
 
 /* The switch inside rq_scene_update asks the monitor the scene was built with. */
 static void update_switch(void) {
-  /* A closed, subdivided cube: a kd-tree saves work on it, so the switch keeps the kd-tree (on a soup
+  /* A Sierpinski tetrahedron: a kd-tree saves work on it, so the switch keeps the kd-tree (on a soup
    * the check after the build could keep the grid instead). */
-  test_mesh mesh = mesh_cube(12);
+  test_mesh mesh = mesh_tetra(5);
   rq_mesh_desc d = mesh_desc(&mesh);
   monitor m;
   errors e;

