@@ -327,3 +327,78 @@ fn a_kd_tree_that_saves_no_work_is_dropped_for_the_grid() {
     let kept = Scene::build(&tetra.as_source(), &auto(u64::MAX / 4), &c).unwrap();
     assert_eq!(kept.report().structure, Structure::KdTree);
 }
+
+#[test]
+fn a_kd_tree_build_over_its_work_limit_is_abandoned_and_releases_everything() {
+    use rayq::select::decision::kd_tree_work_limit;
+    use rayq::{KdTree, KdTreeParams, MemoryBudget};
+    let params = KdTreeParams::DEFAULT;
+    let work_of = |data: &rayq::mesh::MeshData| {
+        let mesh = mesh_of(data);
+        let tree = KdTree::build(&mesh, &params, &mut MemoryBudget::new(0)).unwrap();
+        (mesh.len(), tree.build_work(), tree.node_count())
+    };
+    // Long slivers across the box multiply at every split: over the limit. Well-shaped scenes
+    // stay below it with a quarter to spare.
+    let slivers = rayq::procedural::by_name("slivers", 2000).unwrap();
+    let (n, work, _) = work_of(&slivers);
+    assert!(
+        work > kd_tree_work_limit(n),
+        "slivers: {work} <= {}",
+        kd_tree_work_limit(n)
+    );
+    for data in [kd_friendly(), common::bundled("teapot")] {
+        let (n, work, _) = work_of(&data);
+        assert!(
+            5 * work < 4 * kd_tree_work_limit(n),
+            "{work} vs {}",
+            kd_tree_work_limit(n)
+        );
+    }
+    // Abandoned: nothing built, nothing left charged. At exactly its own work: the same tree.
+    let mesh = mesh_of(&slivers);
+    let mut budget = MemoryBudget::new(0);
+    let none = KdTree::build_within(&mesh, &params, &mut budget, work / 3).unwrap();
+    assert!(none.is_none());
+    assert_eq!(budget.used(), 0);
+    let tetra = mesh_of(&kd_friendly());
+    let full = KdTree::build(&tetra, &params, &mut MemoryBudget::new(0)).unwrap();
+    let exact = KdTree::build_within(&tetra, &params, &mut budget, full.build_work())
+        .unwrap()
+        .expect("a limit of its own work lets the build finish");
+    assert_eq!(
+        (exact.node_count(), exact.reference_count()),
+        (full.node_count(), full.reference_count())
+    );
+    assert!(KdTree::build_within(
+        &tetra,
+        &params,
+        &mut MemoryBudget::new(0),
+        full.build_work() - 1
+    )
+    .unwrap()
+    .is_none());
+    // Through the selector: an estimate that promises a fast, cheap kd-tree builds one on the
+    // slivers, abandons it at the limit and keeps the grid, with the same answers; the online
+    // switch does the same and stops trying.
+    let c = calibration(1.0, 0.01);
+    let scene = Scene::build(&slivers.as_source(), &auto(u64::MAX / 4), &c).unwrap();
+    let r = scene.report();
+    assert!(r.break_even_rays < 1e6, "W* {}", r.break_even_rays);
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::GridFasterPerRay)
+    );
+    let rays = test_rays(&mesh, 8, 100, 7);
+    for (ray, want) in rays.iter().zip(reference_hits(&mesh, &rays)) {
+        assert!(scene.intersect(ray).same_bits(&want));
+    }
+    let mut online = Scene::build(&slivers.as_source(), &auto(0), &c).unwrap();
+    online.update(u64::MAX / 4, 0).unwrap();
+    online.update(u64::MAX / 4, 0).unwrap();
+    let r = online.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::Grid, Outcome::OnlineOnGrid)
+    );
+}

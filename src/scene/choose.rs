@@ -2,11 +2,14 @@
 //! build and again when vertices move).
 
 use super::{Accel, BudgetKind, BuildOptions, Outcome, Structure};
+use crate::accel::kdtree::KdTree;
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::select::calibration::Calibration;
-use crate::select::decision::{kd_tree_confirmed, CostEstimate, Decision, OnlineSwitch};
+use crate::select::decision::{
+    kd_tree_confirmed, kd_tree_work_limit, CostEstimate, Decision, OnlineSwitch,
+};
 use crate::select::model::SceneFeatures;
 use crate::select::sample::{sample_grid, sample_kdtree, RaySource};
 
@@ -75,17 +78,30 @@ pub(super) fn choose(
     if outcome == Outcome::AboveBreakEven {
         // The grid goes first, so the limit need hold only the mesh and the kd-tree.
         accel.release(budget);
-        accel = Accel::build(Structure::KdTree, mesh, options, budget)?;
-        // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the same
-        // sample rays goes, and the grid (linear, quick) is built again.
-        if let Accel::KdTree(tree) = &accel {
-            let kd = sample_kdtree(tree, mesh, samples, &sample_params);
-            if !kd_tree_confirmed(calibration, &features, &kd) {
-                accel.release(budget);
-                outcome = Outcome::GridFasterPerRay;
-                accel = Accel::build(Structure::Grid, mesh, options, budget)?;
+        let limit = kd_tree_work_limit(features.triangles);
+        let kept = match KdTree::build_within(mesh, &options.kdtree, budget, limit)? {
+            // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the same
+            // sample rays goes.
+            Some(tree) => {
+                let kd = sample_kdtree(&tree, mesh, samples, &sample_params);
+                if kd_tree_confirmed(calibration, &features, &kd) {
+                    Some(tree)
+                } else {
+                    Accel::KdTree(tree).release(budget);
+                    None
+                }
             }
-        }
+            // Abandoned: its straddlers multiplied past any worthwhile tree's work.
+            None => None,
+        };
+        accel = match kept {
+            Some(tree) => Accel::KdTree(tree),
+            None => {
+                // The grid (linear, quick) is built again.
+                outcome = Outcome::GridFasterPerRay;
+                Accel::build(Structure::Grid, mesh, options, budget)?
+            }
+        };
     }
     Ok(Choice {
         accel,

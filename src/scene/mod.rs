@@ -11,7 +11,9 @@ use crate::geometry::{Conditions, Geometry, HitEx, RayEx, Visibility};
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
-use crate::select::decision::{kd_tree_confirmed, CostEstimate, Decision, OnlineSwitch};
+use crate::select::decision::{
+    kd_tree_confirmed, kd_tree_work_limit, CostEstimate, Decision, OnlineSwitch,
+};
 use crate::select::model::SceneFeatures;
 use crate::select::sample::{sample_kdtree, RaySource, SampleParams};
 
@@ -492,7 +494,14 @@ impl Scene {
         }
         let mut budget = self.options.budget();
         budget.charge(self.memory_bytes(), "the scene's mesh and grid")?;
-        let tree = KdTree::build(&self.mesh, &self.options.kdtree, &mut budget)?;
+        let limit = kd_tree_work_limit(self.mesh.len() - self.mesh.degenerate_count());
+        let Some(tree) =
+            KdTree::build_within(&self.mesh, &self.options.kdtree, &mut budget, limit)?
+        else {
+            // Abandoned (see `kd_tree_work_limit`): keep the grid and stop considering the switch.
+            self.online = None;
+            return Ok(());
+        };
         if let Some(grid) = &self.grid_samples {
             let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
             if !kd_tree_confirmed(&self.calibration, grid, &kd) {

@@ -69,9 +69,25 @@ pub(super) struct Built {
     pub leaves: u32,
     /// Triangle references held by the leaves (`prims` less its padding).
     pub references: usize,
+    /// Items the build's nodes held, summed over every node it split or made a leaf (its work).
+    pub work: u64,
     /// Leaves made because their subtree's reference share ran out, and the largest of them.
     pub budget_leaves: usize,
     pub largest_budget_leaf: usize,
+}
+
+/// Why a build stopped before its tree was done.
+pub(super) enum Stop {
+    /// An allocation, the memory limit, the monitor or a capacity refused.
+    Failed(BuildError),
+    /// The nodes held more items in all than the caller's work limit.
+    OverWork,
+}
+
+impl From<BuildError> for Stop {
+    fn from(e: BuildError) -> Stop {
+        Stop::Failed(e)
+    }
 }
 
 /// The chosen split of a node.
@@ -265,20 +281,25 @@ struct Builder<'a> {
     references: usize,
     budget_leaves: usize,
     largest_budget_leaf: usize,
+    /// Items held by the nodes visited so far, and the most allowed.
+    work: u64,
+    work_limit: u64,
 }
 
-/// Builds the tree over the non-degenerate triangles of `mesh` inside `root`.
+/// Builds the tree over the non-degenerate triangles of `mesh` inside `root`, stopping with
+/// [`Stop::OverWork`] once its nodes have held more than `work_limit` items in all.
 pub(super) fn build(
     mesh: &TriMesh,
     params: &KdTreeParams,
     root: Aabb,
     budget: &mut MemoryBudget,
-) -> Result<Built, BuildError> {
+    work_limit: u64,
+) -> Result<Built, Stop> {
     let live = mesh.len() - mesh.degenerate_count();
     if mesh.len() > u32::MAX as usize {
-        return Err(BuildError::CapacityExceeded {
+        return Err(Stop::Failed(BuildError::CapacityExceeded {
             what: "kd-tree triangle ids",
-        });
+        }));
     }
     let max_depth = if params.max_depth == 0 {
         auto_depth(live)
@@ -306,8 +327,10 @@ pub(super) fn build(
         references: 0,
         budget_leaves: 0,
         largest_budget_leaf: 0,
+        work: 0,
+        work_limit,
     };
-    let result = b.root_items(live).and_then(|()| {
+    let result = b.root_items(live).map_err(Stop::from).and_then(|()| {
         b.budget
             .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         b.node(0, 0, LOWER, root, refs_allowed.max(live), 0)
@@ -324,6 +347,7 @@ pub(super) fn build(
         references,
         budget_leaves,
         largest_budget_leaf,
+        work,
         ..
     } = b;
     let mut levels = levels;
@@ -344,6 +368,7 @@ pub(super) fn build(
             references,
             budget_leaves,
             largest_budget_leaf,
+            work,
         }),
         Err(e) => {
             budget.free(nodes);
@@ -402,8 +427,12 @@ impl Builder<'_> {
         bbox: Aabb,
         refs_allowed: usize,
         mut bad: u32,
-    ) -> Result<f64, BuildError> {
+    ) -> Result<f64, Stop> {
         let n = self.items(depth, side).len();
+        self.work = self.work.saturating_add(n as u64);
+        if self.work > self.work_limit {
+            return Err(Stop::OverWork);
+        }
         self.depth = self.depth.max(depth);
         let leaf_cost = self.costs.leaf(n);
         // The automatic limit is a safety net for the SAH, not a leaf size: a node of more than a few
@@ -421,18 +450,18 @@ impl Builder<'_> {
             self.exact_split(depth, side, &bbox)?
         };
         let Some(split) = split else {
-            return self.leaf(index, depth, side).map(|()| leaf_cost);
+            return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
         };
         if !(split.cost < leaf_cost) {
             if (split.cost > 4.0 * leaf_cost && n < SMALL_NODE) || bad >= MAX_BAD_REFINES {
-                return self.leaf(index, depth, side).map(|()| leaf_cost);
+                return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
             }
             bad += 1;
         }
         if split.left + split.right > refs_allowed {
             self.budget_leaves += 1;
             self.largest_budget_leaf = self.largest_budget_leaf.max(n);
-            return self.leaf(index, depth, side).map(|()| leaf_cost);
+            return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
         }
         let (mut left_box, mut right_box) = (bbox, bbox);
         left_box.max[split.axis] = split.pos;
@@ -441,9 +470,9 @@ impl Builder<'_> {
         // The children side by side, after every node made so far.
         let children = self.nodes.len();
         if children > MAX_CHILD_INDEX as usize {
-            return Err(BuildError::CapacityExceeded {
+            return Err(Stop::Failed(BuildError::CapacityExceeded {
                 what: "kd-tree nodes (at most 2^28)",
-            });
+            }));
         }
         for _ in 0..2 {
             self.budget
@@ -468,7 +497,7 @@ impl Builder<'_> {
         let (pl, pr) = probabilities(&bbox, split.axis, split.pos);
         let cost = self.costs.interior(pl, pr, cost_l, cost_r, nl, nr);
         if cost >= leaf_cost {
-            return self.retract(index, children, mark).map(|()| leaf_cost);
+            return Ok(self.retract(index, children, mark).map(|()| leaf_cost)?);
         }
         Ok(cost)
     }

@@ -145,6 +145,7 @@ pub struct KdTree {
     references: usize,
     budget_leaves: usize,
     largest_budget_leaf: usize,
+    work: u64,
 }
 
 impl KdTree {
@@ -155,6 +156,25 @@ impl KdTree {
         params: &KdTreeParams,
         budget: &mut MemoryBudget,
     ) -> Result<KdTree, BuildError> {
+        match Self::build_within(mesh, params, budget, u64::MAX) {
+            Ok(Some(tree)) => Ok(tree),
+            Err(e) => Err(e),
+            // No build holds 2^64 items (each is 20 bytes of memory charged to the budget).
+            Ok(None) => Err(BuildError::CapacityExceeded {
+                what: "kd-tree build work",
+            }),
+        }
+    }
+
+    /// [`KdTree::build`], abandoned (`Ok(None)`, everything it took released) once its nodes have
+    /// held more than `work_limit` items in all ([`KdTree::build_work`] of the finished tree): the
+    /// selector's way of not paying in full for a tree that duplicates triangles without end.
+    pub fn build_within(
+        mesh: &TriMesh,
+        params: &KdTreeParams,
+        budget: &mut MemoryBudget,
+        work_limit: u64,
+    ) -> Result<Option<KdTree>, BuildError> {
         params.validate()?;
         let bounds = mesh.bounds();
         let live = mesh.len() - mesh.degenerate_count();
@@ -168,11 +188,16 @@ impl KdTree {
                 depth: 0,
                 leaves: 1,
                 references: 0,
+                work: 0,
                 budget_leaves: 0,
                 largest_budget_leaf: 0,
             }
         } else {
-            build::build(mesh, params, root, budget)?
+            match build::build(mesh, params, root, budget, work_limit) {
+                Ok(built) => built,
+                Err(build::Stop::Failed(e)) => return Err(e),
+                Err(build::Stop::OverWork) => return Ok(None),
+            }
         };
         let packs = match TrianglePacks::build(mesh, &built.prims, params.layout, budget) {
             Ok(p) => p,
@@ -182,7 +207,7 @@ impl KdTree {
                 return Err(e);
             }
         };
-        Ok(KdTree {
+        Ok(Some(KdTree {
             bounds: root,
             nodes: built.nodes,
             prims: built.prims,
@@ -192,7 +217,15 @@ impl KdTree {
             references: built.references,
             budget_leaves: built.budget_leaves,
             largest_budget_leaf: built.largest_budget_leaf,
-        })
+            work: built.work,
+        }))
+    }
+
+    /// Items the build's nodes held, summed over every node it split or made a leaf: the build's
+    /// work, about `N·log2 N` times a small factor on well-shaped scenes and far more where
+    /// straddlers multiply.
+    pub fn build_work(&self) -> u64 {
+        self.work
     }
 
     /// Nodes in the tree (interior and leaves).
