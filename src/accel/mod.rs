@@ -49,7 +49,7 @@ pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
     accept: Option<&dyn Accept>,
     walk: L,
 ) -> Hit {
-    match PreparedRay::new(ray) {
+    match PreparedRay::prepare(ray) {
         Some(r) => r
             .for_scene(mesh.coordinate_bound())
             .dispatch_accepting(accept, walk),

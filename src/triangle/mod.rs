@@ -178,12 +178,22 @@ impl PreparedRay {
     /// direction, a NaN bound, or `tmin > tmax`.
     #[inline]
     pub fn new(ray: &Ray) -> Option<PreparedRay> {
+        Self::prepare(ray)
+    }
+
+    /// [`PreparedRay::new`], always inline: the queries' one entry ([`crate::accel::run_query`])
+    /// then builds the ray in place instead of returning it through memory.
+    ///
+    /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
+    /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).
+    #[inline(always)]
+    pub(crate) fn prepare(ray: &Ray) -> Option<PreparedRay> {
         let (o, d) = (ray.org, ray.dir);
-        if !(o.is_finite() && d.is_finite()) || d == Vec3::ZERO {
-            return None;
-        }
-        // NaN fails both comparisons; an infinite tmin is allowed only as an empty window.
-        if !(ray.tmin <= ray.tmax) {
+        // `x − x` is +0 for a finite `x` and NaN for ±∞ and NaN, so the sum is 0 exactly when all
+        // six components are finite. NaN bounds fail `<=`; an infinite tmin is allowed only as an
+        // empty window.
+        let finite = (o - o) + (d - d);
+        if !((finite.x + finite.y + finite.z == 0.0) & (ray.tmin <= ray.tmax)) {
             return None;
         }
         let a = d.abs();
@@ -194,13 +204,19 @@ impl PreparedRay {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        // Keep the winding so that the sign of the edge functions does not depend on the ray's sense.
-        let swap = d[kz] < 0.0;
-        if swap {
-            core::mem::swap(&mut kx, &mut ky);
+        // `d[kz]` has the largest magnitude, so it is zero exactly when the direction is.
+        let (dz, d1, d2) = match kz {
+            0 => (d.x, d.y, d.z),
+            1 => (d.y, d.z, d.x),
+            _ => (d.z, d.x, d.y),
+        };
+        if dz == 0.0 {
+            return None;
         }
+        // Keep the winding so that the sign of the edge functions does not depend on the ray's
+        // sense: `kx, ky = kz + 2, kz + 1` when `d[kz] < 0`, `kz + 1, kz + 2` otherwise.
+        let swap = dz < 0.0;
+        let (dx, dy) = if swap { (d2, d1) } else { (d1, d2) };
         Some(PreparedRay {
             org: o,
             dir: d,
@@ -208,11 +224,11 @@ impl PreparedRay {
             tmax: ray.tmax,
             axes: (2 * kz + usize::from(swap)) as u8,
             org64: [f64::from(o.x), f64::from(o.y), f64::from(o.z)],
-            sx: f64::from(d[kx]) / f64::from(d[kz]),
-            sy: f64::from(d[ky]) / f64::from(d[kz]),
-            sz: 1.0 / f64::from(d[kz]),
-            sx32: d[kx] / d[kz],
-            sy32: d[ky] / d[kz],
+            sx: f64::from(dx) / f64::from(dz),
+            sy: f64::from(dy) / f64::from(dz),
+            sz: 1.0 / f64::from(dz),
+            sx32: dx / dz,
+            sy32: dy / dz,
             filter_ok: false,
         })
     }
