@@ -49,10 +49,8 @@ pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
     accept: Option<&dyn Accept>,
     walk: L,
 ) -> Hit {
-    match PreparedRay::prepare(ray) {
-        Some(r) => r
-            .for_scene(mesh.coordinate_bound())
-            .dispatch_accepting(accept, walk),
+    match PreparedRay::prepare(ray, mesh.coordinate_bound()) {
+        Some(r) => r.dispatch_accepting(accept, walk),
         None => Hit::MISS,
     }
 }

@@ -178,16 +178,18 @@ impl PreparedRay {
     /// direction, a NaN bound, or `tmin > tmax`.
     #[inline]
     pub fn new(ray: &Ray) -> Option<PreparedRay> {
-        Self::prepare(ray)
+        // An infinite scale leaves the filter off, as before `for_scene`.
+        Self::prepare(ray, f32::INFINITY)
     }
 
-    /// [`PreparedRay::new`], always inline: the queries' one entry ([`crate::accel::run_query`])
-    /// then builds the ray in place instead of returning it through memory.
+    /// [`PreparedRay::new`] then [`PreparedRay::for_scene`]`(scale)`, always inline: the queries'
+    /// one entry ([`crate::accel::run_query`]) then builds the ray once, in place, instead of
+    /// returning it through memory and copying it.
     ///
     /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
     /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).
     #[inline(always)]
-    pub(crate) fn prepare(ray: &Ray) -> Option<PreparedRay> {
+    pub(crate) fn prepare(ray: &Ray, scale: f32) -> Option<PreparedRay> {
         let (o, d) = (ray.org, ray.dir);
         // `x − x` is +0 for a finite `x` and NaN for ±∞ and NaN, so the sum is 0 exactly when all
         // six components are finite. NaN bounds fail `<=`; an infinite tmin is allowed only as an
@@ -229,7 +231,7 @@ impl PreparedRay {
             sz: 1.0 / f64::from(dz),
             sx32: dx / dz,
             sy32: dy / dz,
-            filter_ok: false,
+            filter_ok: Self::filter_may_run(o, scale),
         })
     }
 
@@ -237,11 +239,18 @@ impl PreparedRay {
     /// `scale`, which lets the four-wide f32 filter run when no value it computes can overflow
     /// (`scale + |org|` below 2^60). Answers never depend on it: the filter only rejects what the
     /// exact test rejects.
-    #[inline]
+    #[cfg(test)]
     pub(crate) fn for_scene(mut self, scale: f32) -> Self {
-        let reach = f64::from(scale) + f64::from(self.org.abs().max_element());
-        self.filter_ok = reach < 1.152_921_504_606_847e18;
+        self.filter_ok = Self::filter_may_run(self.org, scale);
         self
+    }
+
+    /// Whether no f32 value of the filter can overflow for coordinates of magnitude at most
+    /// `scale` and the origin `org`: `scale + |org|` below 2^60 (false for NaN or ∞).
+    #[inline(always)]
+    fn filter_may_run(org: Vec3, scale: f32) -> bool {
+        let reach = f64::from(scale) + f64::from(org.abs().max_element());
+        reach < 1.152_921_504_606_847e18
     }
 
     /// Runs `lp` with the triangle test specialised for this ray's axes.
