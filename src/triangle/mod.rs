@@ -194,6 +194,7 @@ impl PreparedRay {
         // `x − x` is +0 for a finite `x` and NaN for ±∞ and NaN, so the sum is 0 exactly when all
         // six components are finite. NaN bounds fail `<=`; an infinite tmin is allowed only as an
         // empty window.
+        #[allow(clippy::eq_op)] // `x − x` on purpose: it is the finiteness test.
         let finite = (o - o) + (d - d);
         if !((finite.x + finite.y + finite.z == 0.0) & (ray.tmin <= ray.tmax)) {
             return None;
