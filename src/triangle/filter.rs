@@ -10,7 +10,7 @@
 //! distance. A lane is rejected only when one edge function is above `E` and another below `−E`: then
 //! the exact ones have mixed signs, and the exact test misses.
 //!
-//! The bound needs every value to stay finite; [`super::PreparedRay::for_scene`] turns the filter
+//! The bound needs every value to stay finite; preparing the ray for the scene turns the filter
 //! off (every lane survives) when coordinates or the origin reach 2^60. Below that no real triangle
 //! gives a NaN, so a lane whose edge function is NaN is an unused one (NaN coordinates, the padding
 //! of block-aligned lists) and is rejected too.

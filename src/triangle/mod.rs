@@ -39,7 +39,8 @@ const BOUND_SLACK: f64 = 1.0 + 1.0 / 262_144.0;
 const EDGE_BOUND_FLOOR64: f64 = 1e-300;
 
 /// A ray with the per-ray constants of the triangle test computed once. Only
-/// [`PreparedRay::new`] makes one, and it refuses rays that cannot hit anything.
+/// [`PreparedRay::new`] (and the queries' in-place form of it) makes one, and it refuses rays that
+/// cannot hit anything.
 ///
 /// Guarantees: origin and direction are finite, the direction is not zero, `tmin ≤ tmax`, and neither
 /// is NaN.
@@ -62,8 +63,8 @@ pub struct PreparedRay {
     /// The shear in f32, for the four-wide filter.
     sx32: f32,
     sy32: f32,
-    /// Whether the f32 filter may run: set by [`PreparedRay::for_scene`] when no f32 value of the
-    /// filter can overflow.
+    /// Whether the f32 filter may run: set when the ray is prepared for a scene (`prepare`) where
+    /// no f32 value of the filter can overflow.
     filter_ok: bool,
 }
 
@@ -178,13 +179,14 @@ impl PreparedRay {
     /// direction, a NaN bound, or `tmin > tmax`.
     #[inline]
     pub fn new(ray: &Ray) -> Option<PreparedRay> {
-        // An infinite scale leaves the filter off, as before `for_scene`.
+        // An infinite scale leaves the filter off (the queries turn it on for their scene).
         Self::prepare(ray, f32::INFINITY)
     }
 
-    /// [`PreparedRay::new`] then [`PreparedRay::for_scene`]`(scale)`, always inline: the queries'
-    /// one entry ([`crate::accel::run_query`]) then builds the ray once, in place, instead of
-    /// returning it through memory and copying it.
+    /// [`PreparedRay::new`] with the filter allowed for triangles whose coordinates are at most
+    /// `scale` in magnitude (see `for_scene`), always inline: the queries' one entry
+    /// ([`crate::accel::run_query`]) then builds the ray once, in place, instead of returning it
+    /// through memory and copying it.
     ///
     /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
     /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).
