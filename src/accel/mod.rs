@@ -5,7 +5,7 @@ use glam::Vec3;
 use crate::mesh::TriMesh;
 pub use crate::ray::Aabb;
 use crate::ray::{Hit, Ray};
-use crate::triangle::packs::TrianglePacks;
+use crate::triangle::packs::{TriangleLayout, TrianglePacks};
 use crate::triangle::{Accept, Block4, PreparedRay, TriangleLoop, TriangleTest};
 
 pub mod brute;
@@ -49,10 +49,8 @@ pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
     accept: Option<&dyn Accept>,
     walk: L,
 ) -> Hit {
-    match PreparedRay::new(ray) {
-        Some(r) => r
-            .for_scene(mesh.coordinate_bound())
-            .dispatch_accepting(accept, walk),
+    match PreparedRay::prepare(ray, mesh.coordinate_bound()) {
+        Some(r) => r.dispatch_accepting(accept, walk),
         None => Hit::MISS,
     }
 }
@@ -101,6 +99,10 @@ impl Mailbox {
 
 /// A structure's reference list and the packs of its triangles (built from that list, or empty for
 /// the indexed layout).
+///
+/// With packs, every list handed to [`test_refs`] starts on a block (a multiple of 4) and the lanes
+/// past its end in its last block are padding (`Hit::INVALID_ID`, NaN in the packs): the kd-tree's
+/// packed leaves are laid out so.
 #[derive(Clone, Copy)]
 pub(crate) struct Refs<'a> {
     /// Triangle ids, cell by cell or leaf by leaf.
@@ -128,15 +130,18 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
     if start >= end {
         return None;
     }
+    debug_assert!(packs.layout() == TriangleLayout::Indexed || start % 4 == 0);
     let mut base = start & !3;
     while base < end {
-        let lanes = lanes_in(start, end, base);
         let gathered;
-        let block = match packs.block(base / 4) {
-            Some(b) => b,
+        let (block, lanes) = match packs.block(base / 4) {
+            // Packed lists start on a block and their last block's other lanes are padding (NaN,
+            // rejected by the filter; id INVALID, skipped when the filter is off): no lane mask.
+            Some(b) => (b, 0b1111),
             None => {
+                let lanes = lanes_in(start, end, base);
                 gathered = gather(mesh, ids, base, lanes);
-                &gathered
+                (&gathered, lanes)
             }
         };
         let survivors = test.survivors(block) & lanes;

@@ -39,7 +39,8 @@ const BOUND_SLACK: f64 = 1.0 + 1.0 / 262_144.0;
 const EDGE_BOUND_FLOOR64: f64 = 1e-300;
 
 /// A ray with the per-ray constants of the triangle test computed once. Only
-/// [`PreparedRay::new`] makes one, and it refuses rays that cannot hit anything.
+/// [`PreparedRay::new`] (and the queries' in-place form of it) makes one, and it refuses rays that
+/// cannot hit anything.
 ///
 /// Guarantees: origin and direction are finite, the direction is not zero, `tmin ≤ tmax`, and neither
 /// is NaN.
@@ -62,8 +63,8 @@ pub struct PreparedRay {
     /// The shear in f32, for the four-wide filter.
     sx32: f32,
     sy32: f32,
-    /// Whether the f32 filter may run: set by [`PreparedRay::for_scene`] when no f32 value of the
-    /// filter can overflow.
+    /// Whether the f32 filter may run: set when the ray is prepared for a scene (`prepare`) where
+    /// no f32 value of the filter can overflow.
     filter_ok: bool,
 }
 
@@ -178,12 +179,26 @@ impl PreparedRay {
     /// direction, a NaN bound, or `tmin > tmax`.
     #[inline]
     pub fn new(ray: &Ray) -> Option<PreparedRay> {
+        // An infinite scale leaves the filter off (the queries turn it on for their scene).
+        Self::prepare(ray, f32::INFINITY)
+    }
+
+    /// [`PreparedRay::new`] with the filter allowed for triangles whose coordinates are at most
+    /// `scale` in magnitude (see `for_scene`), always inline: the queries' one entry
+    /// ([`crate::accel::run_query`]) then builds the ray once, in place, instead of returning it
+    /// through memory and copying it.
+    ///
+    /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
+    /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).
+    #[inline(always)]
+    pub(crate) fn prepare(ray: &Ray, scale: f32) -> Option<PreparedRay> {
         let (o, d) = (ray.org, ray.dir);
-        if !(o.is_finite() && d.is_finite()) || d == Vec3::ZERO {
-            return None;
-        }
-        // NaN fails both comparisons; an infinite tmin is allowed only as an empty window.
-        if !(ray.tmin <= ray.tmax) {
+        // `x − x` is +0 for a finite `x` and NaN for ±∞ and NaN, so the sum is 0 exactly when all
+        // six components are finite. NaN bounds fail `<=`; an infinite tmin is allowed only as an
+        // empty window.
+        #[allow(clippy::eq_op)] // `x − x` on purpose: it is the finiteness test.
+        let finite = (o - o) + (d - d);
+        if !((finite.x + finite.y + finite.z == 0.0) & (ray.tmin <= ray.tmax)) {
             return None;
         }
         let a = d.abs();
@@ -194,13 +209,19 @@ impl PreparedRay {
         } else {
             2
         };
-        let mut kx = (kz + 1) % 3;
-        let mut ky = (kx + 1) % 3;
-        // Keep the winding so that the sign of the edge functions does not depend on the ray's sense.
-        let swap = d[kz] < 0.0;
-        if swap {
-            core::mem::swap(&mut kx, &mut ky);
+        // `d[kz]` has the largest magnitude, so it is zero exactly when the direction is.
+        let (dz, d1, d2) = match kz {
+            0 => (d.x, d.y, d.z),
+            1 => (d.y, d.z, d.x),
+            _ => (d.z, d.x, d.y),
+        };
+        if dz == 0.0 {
+            return None;
         }
+        // Keep the winding so that the sign of the edge functions does not depend on the ray's
+        // sense: `kx, ky = kz + 2, kz + 1` when `d[kz] < 0`, `kz + 1, kz + 2` otherwise.
+        let swap = dz < 0.0;
+        let (dx, dy) = if swap { (d2, d1) } else { (d1, d2) };
         Some(PreparedRay {
             org: o,
             dir: d,
@@ -208,12 +229,12 @@ impl PreparedRay {
             tmax: ray.tmax,
             axes: (2 * kz + usize::from(swap)) as u8,
             org64: [f64::from(o.x), f64::from(o.y), f64::from(o.z)],
-            sx: f64::from(d[kx]) / f64::from(d[kz]),
-            sy: f64::from(d[ky]) / f64::from(d[kz]),
-            sz: 1.0 / f64::from(d[kz]),
-            sx32: d[kx] / d[kz],
-            sy32: d[ky] / d[kz],
-            filter_ok: false,
+            sx: f64::from(dx) / f64::from(dz),
+            sy: f64::from(dy) / f64::from(dz),
+            sz: 1.0 / f64::from(dz),
+            sx32: dx / dz,
+            sy32: dy / dz,
+            filter_ok: Self::filter_may_run(o, scale),
         })
     }
 
@@ -221,11 +242,18 @@ impl PreparedRay {
     /// `scale`, which lets the four-wide f32 filter run when no value it computes can overflow
     /// (`scale + |org|` below 2^60). Answers never depend on it: the filter only rejects what the
     /// exact test rejects.
-    #[inline]
+    #[cfg(test)]
     pub(crate) fn for_scene(mut self, scale: f32) -> Self {
-        let reach = f64::from(scale) + f64::from(self.org.abs().max_element());
-        self.filter_ok = reach < 1.152_921_504_606_847e18;
+        self.filter_ok = Self::filter_may_run(self.org, scale);
         self
+    }
+
+    /// Whether no f32 value of the filter can overflow for coordinates of magnitude at most
+    /// `scale` and the origin `org`: `scale + |org|` below 2^60 (false for NaN or ∞).
+    #[inline(always)]
+    fn filter_may_run(org: Vec3, scale: f32) -> bool {
+        let reach = f64::from(scale) + f64::from(org.abs().max_element());
+        reach < 1.152_921_504_606_847e18
     }
 
     /// Runs `lp` with the triangle test specialised for this ray's axes.
