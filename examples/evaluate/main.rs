@@ -23,7 +23,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use rayq::mesh::MeshData;
-use rayq::select::decision::kd_tree_confirmed;
+use rayq::select::decision::{kd_tree_confirmed, kd_tree_work_limit};
 use rayq::select::fit::Observation;
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
@@ -186,6 +186,9 @@ struct Measured {
     samples: Vec<(SceneFeatures, f64)>,
     /// The same sample rays through the kd-tree (for the selector's check after building it).
     kd_samples: Vec<(SceneFeatures, f64)>,
+    /// When the selector's kd-tree build stops at its work limit (`kd_tree_work_limit`): the
+    /// seconds it took until then (median of the repeats). None: it finishes.
+    abandoned_s: Option<f64>,
     /// rayq's accuracy against the exact answers, grid and kd-tree (None: not checked).
     rayq_accuracy: Option<[accuracy::Accuracy; 2]>,
     peers: Vec<PeerResult>,
@@ -256,6 +259,25 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     };
     let samples = timed(&|p| sample_grid(&grid, &mesh, None, p));
     let kd_samples = timed(&|p| sample_kdtree(&tree, &mesh, None, p));
+    let limit = kd_tree_work_limit(mesh.len() - mesh.degenerate_count());
+    let abandoned_s = (tree.build_work() > limit).then(|| {
+        let mut times: Vec<f64> = (0..params.repeats.max(1))
+            .map(|_| {
+                let t = thread_seconds();
+                let none = KdTree::build_within(
+                    &mesh,
+                    &KdTreeParams::DEFAULT,
+                    &mut MemoryBudget::new(0),
+                    limit,
+                );
+                let dt = thread_seconds() - t;
+                debug_assert!(matches!(none, Ok(None)));
+                dt
+            })
+            .collect();
+        times.sort_by(f64::total_cmp);
+        times[times.len() / 2]
+    });
     // Accuracy against the exact answers (brute force, so only where it is affordable).
     let limit = if quick { 20_000 } else { 130_000 };
     let check = (mesh.len() <= limit).then(|| {
@@ -309,6 +331,7 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
         spread,
         samples,
         kd_samples,
+        abandoned_s,
         rayq_accuracy,
         peers,
     })
@@ -325,13 +348,15 @@ struct Totals {
 
 /// What the selector sees and pays on a scene for one budget: its W* estimate, the time of its
 /// sample rays on the grid, whether the kd-tree passes the check after it is built, and the time of
-/// the sample rays on the kd-tree (the check's cost).
+/// the sample rays on the kd-tree (the check's cost); or, when the build stops at its work limit,
+/// the time until then (the grid stays, rebuilt).
 #[derive(Clone, Copy)]
 struct Selector {
     w_est: f64,
     sample_s: f64,
     confirmed: bool,
     check_s: f64,
+    abandoned_s: Option<f64>,
 }
 
 /// The total of choosing the kd-tree after `first` rays on the grid: its build, the check, and the
@@ -342,6 +367,10 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64) -> f64 {
         o.grid_ray_ns * 1e-9,
         o.kd_ray_ns * 1e-9,
     );
+    if let Some(abandoned) = s.abandoned_s {
+        // Stopped at the work limit; the grid is built again (the known budget released it).
+        return first * tg + abandoned + o.grid_build_ns * 1e-9 + (r - first) * tg;
+    }
     let rest = if s.confirmed { tk } else { tg };
     first * tg + b + s.check_s + (r - first) * rest
 }
@@ -498,6 +527,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
                 &m.kd_samples[k].0,
             ),
             check_s: m.kd_samples[k].1 * 1e-9,
+            abandoned_s: m.abandoned_s,
         }
     };
     let at = |i: usize, r: f64| totals(&results[i].obs, &selector(i, r), &selector(i, 0.0), r);
@@ -528,7 +558,9 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             regrets.push(q);
             decisions += 1;
             let sel = selector(i, r);
-            right += usize::from((r >= sel.w_est && sel.confirmed) == (t.kd < t.grid));
+            right += usize::from(
+                (r >= sel.w_est && sel.confirmed && sel.abandoned_s.is_none()) == (t.kd < t.grid),
+            );
             if q > worst.0 {
                 worst = (q, format!("{} at R = {r:.0e}", m.name));
             }
