@@ -59,6 +59,14 @@ fn geometries<'a>(sources: &'a [IndexedMesh<'a>]) -> Vec<Geometry<'a>> {
 }
 
 /// Camera, bounce and adversarial rays over the union, each with a mask and flags from a cycle.
+/// Options that build the grid alone (the selector does not run).
+fn grid_only() -> BuildOptions {
+    BuildOptions {
+        structure: Structure::Grid,
+        ..BuildOptions::DEFAULT
+    }
+}
+
 fn rays(parts: &[MeshData]) -> Vec<RayEx> {
     let mut all = MeshData::default();
     for p in parts {
@@ -232,10 +240,7 @@ fn conditions_change_the_answers_they_should() {
     let parts = parts();
     let sources: Vec<IndexedMesh<'_>> = parts.iter().map(MeshData::as_source).collect();
     let rays = rays(&parts);
-    let options = BuildOptions {
-        structure: Structure::Grid,
-        ..BuildOptions::DEFAULT
-    };
+    let options = grid_only();
     let plain: Vec<Geometry<'_>> = sources.iter().map(|p| Geometry::new(p)).collect();
     let plain = Scene::build_geometries(plain, &options, Calibration::builtin(), None).unwrap();
     let conditioned =
@@ -413,10 +418,7 @@ fn a_refused_move_leaves_the_scene_as_it_was() {
     let parts = parts();
     let sources: Vec<IndexedMesh<'_>> = parts.iter().map(MeshData::as_source).collect();
     let rays = rays(&parts);
-    let options = BuildOptions {
-        structure: Structure::Grid,
-        ..BuildOptions::DEFAULT
-    };
+    let options = grid_only();
     let mut scene =
         Scene::build_geometries(geometries(&sources), &options, Calibration::builtin(), None)
             .unwrap();
