@@ -136,6 +136,7 @@ impl MemoryBudget {
             self.release(bytes);
             return Err(BuildError::OutOfMemory { what, bytes });
         }
+        hint_huge_pages(&mut v);
         Ok(v)
     }
 
@@ -173,6 +174,7 @@ impl MemoryBudget {
                 self.release(bytes);
                 return Err(BuildError::OutOfMemory { what, bytes });
             }
+            hint_huge_pages(v);
             // The allocator may round up; count what is really held so `free` balances.
             let extra = (v.capacity() - before).saturating_sub(more) * core::mem::size_of::<T>();
             self.used += extra;
@@ -186,6 +188,35 @@ impl MemoryBudget {
     pub fn free<T>(&mut self, v: Vec<T>) {
         self.release(v.capacity() * core::mem::size_of::<T>());
     }
+}
+
+/// Asks the kernel to back the whole 2 MiB pages inside `v`'s new, untouched allocation with
+/// transparent huge pages, when it holds at least two of them (Linux with `std`; elsewhere
+/// nothing). A build writes each byte of its large arrays once, right after taking them, so their
+/// first touch is much of a build's time: on the project's VM a fresh 4 KiB page costs about 2 µs
+/// (0.55 ns a byte, against 0.12 ns a byte with the hint; docs/performance.md). Embree gives its
+/// large blocks the same hint. Only advice: a kernel that refuses it changes nothing.
+#[inline]
+fn hint_huge_pages<T>(v: &mut Vec<T>) {
+    #[cfg(all(feature = "std", target_os = "linux"))]
+    {
+        const HUGE: usize = 2 << 20;
+        let bytes = v.capacity().saturating_mul(core::mem::size_of::<T>());
+        if bytes >= 2 * HUGE {
+            let start = v.as_mut_ptr() as usize;
+            let lo = start.saturating_add(HUGE - 1) & !(HUGE - 1);
+            let hi = start.saturating_add(bytes) & !(HUGE - 1);
+            if hi > lo {
+                // SAFETY: [lo, hi) lies inside the allocation `v` owns; MADV_HUGEPAGE changes only
+                // how the kernel backs those pages, never their contents or their validity.
+                unsafe {
+                    libc::madvise(lo as *mut c_void, hi - lo, libc::MADV_HUGEPAGE);
+                }
+            }
+        }
+    }
+    #[cfg(not(all(feature = "std", target_os = "linux")))]
+    let _ = v;
 }
 
 /// Bytes a vector holds (its capacity), for memory reports.

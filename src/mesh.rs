@@ -1,7 +1,7 @@
 //! The validated triangle mesh every structure is built from.
 
 use alloc::vec::Vec;
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::{BuildError, MeshError};
@@ -48,6 +48,71 @@ pub trait MeshSource {
     fn vertex(&self, i: usize) -> [f32; 3];
     /// The three vertex indices of triangle `i` (`i < triangle_count()`), not yet checked.
     fn triangle(&self, i: usize) -> [u32; 3];
+
+    /// The first vertex with a coordinate that is not finite, if any. Provided: validation calls
+    /// it once per geometry, so that the accessors inline into its loop.
+    fn first_non_finite_vertex(&self) -> Option<usize> {
+        (0..self.vertex_count()).find(|&i| !Vec3::from(self.vertex(i)).is_finite())
+    }
+
+    /// Appends every triangle's corners to `tris` and its indices to `indices`, both with room
+    /// for `triangle_count()` more; or, leaving both as they were, refuses the first triangle with
+    /// an index out of range. Provided (one call per geometry, the accessors inlined).
+    fn copy_triangles(
+        &self,
+        tris: &mut Vec<[Vec3; 3]>,
+        indices: &mut Vec<[u32; 3]>,
+    ) -> Result<(), MeshError> {
+        let (n, nv) = (self.triangle_count(), self.vertex_count());
+        let (Some(corners), Some(ids)) = (
+            tris.spare_capacity_mut().get_mut(..n),
+            indices.spare_capacity_mut().get_mut(..n),
+        ) else {
+            return Err(MeshError::CountOverflow {
+                what: "triangle count",
+            });
+        };
+        for (i, (corner, id)) in corners.iter_mut().zip(ids.iter_mut()).enumerate() {
+            let idx = self.triangle(i);
+            if idx[0].max(idx[1]).max(idx[2]) as usize >= nv {
+                return Err(index_out_of_range(i, idx, nv));
+            }
+            id.write(idx);
+            corner.write(idx.map(|vi| Vec3::from(self.vertex(vi as usize))));
+        }
+        let (t, x) = (tris.len() + n, indices.len() + n);
+        // SAFETY: the first `n` slots past each length were written above, and both vectors have
+        // room for them (`get_mut(..n)` succeeded).
+        unsafe {
+            tris.set_len(t);
+            indices.set_len(x);
+        }
+        Ok(())
+    }
+
+    /// The first triangle with an index out of range, if any (what [`MeshSource::copy_triangles`]
+    /// would refuse), without copying.
+    fn first_bad_index(&self) -> Option<MeshError> {
+        let nv = self.vertex_count();
+        (0..self.triangle_count()).find_map(|i| {
+            let idx = self.triangle(i);
+            (idx[0].max(idx[1]).max(idx[2]) as usize >= nv).then(|| index_out_of_range(i, idx, nv))
+        })
+    }
+}
+
+/// The refusal of triangle `triangle`, whose indices `idx` include one not below `vertex_count`.
+#[cold]
+fn index_out_of_range(triangle: usize, idx: [u32; 3], vertex_count: usize) -> MeshError {
+    let index = idx
+        .into_iter()
+        .find(|&vi| vi as usize >= vertex_count)
+        .unwrap_or(u32::MAX);
+    MeshError::IndexOutOfRange {
+        triangle,
+        index,
+        vertex_count,
+    }
 }
 
 /// An indexed mesh borrowed from Rust slices.
@@ -96,34 +161,30 @@ impl TriMesh {
         sources: &[&dyn MeshSource],
         budget: &mut MemoryBudget,
     ) -> Result<TriMesh, BuildError> {
+        // Refusals come in geometry order, and within a geometry vertices before indices; the
+        // indices are checked while they are copied, so a failed allocation looks for a bad index
+        // first (a refused mesh is refused whatever the memory limit).
+        let refusal = |upto: usize| {
+            sources.iter().take(upto).enumerate().find_map(|(g, src)| {
+                src.first_non_finite_vertex()
+                    .map(|vertex| MeshError::NonFiniteVertex { vertex })
+                    .or_else(|| src.first_bad_index())
+                    .map(|error| BuildError::InvalidGeometry { geometry: g, error })
+            })
+        };
         let mut n = 0usize;
         for (g, src) in sources.iter().enumerate() {
             n = n.saturating_add(src.triangle_count());
             let bad = |error| BuildError::InvalidGeometry { geometry: g, error };
             if n >= u32::MAX as usize || n.checked_mul(core::mem::size_of::<[Vec3; 3]>()).is_none()
             {
-                return Err(bad(MeshError::CountOverflow {
+                return Err(refusal(g).unwrap_or(bad(MeshError::CountOverflow {
                     what: "triangle count",
-                }));
-            }
-            for vi in 0..src.vertex_count() {
-                if !Vec3::from(src.vertex(vi)).is_finite() {
-                    return Err(bad(MeshError::NonFiniteVertex { vertex: vi }));
-                }
-            }
-            for i in 0..src.triangle_count() {
-                let nv = src.vertex_count();
-                if let Some(&vi) = src.triangle(i).iter().find(|&&vi| vi as usize >= nv) {
-                    return Err(bad(MeshError::IndexOutOfRange {
-                        triangle: i,
-                        index: vi,
-                        vertex_count: nv,
-                    }));
-                }
+                })));
             }
         }
         let mut mesh = TriMesh {
-            tris: budget.vec(n, "mesh triangles")?,
+            tris: Vec::new(),
             degenerate_bits: Vec::new(),
             bounds: Aabb::EMPTY,
             degenerate: 0,
@@ -131,26 +192,30 @@ impl TriMesh {
             starts: Vec::new(),
             vertex_counts: Vec::new(),
         };
-        let filled = (|| {
+        let allocated = (|| {
+            mesh.tris = budget.vec(n, "mesh triangles")?;
             mesh.degenerate_bits = budget.filled(n.div_ceil(32), 0u32, "mesh degenerate flags")?;
             mesh.indices = budget.vec(n, "mesh indices")?;
             mesh.starts = budget.vec(sources.len() + 1, "mesh geometries")?;
             mesh.vertex_counts = budget.vec(sources.len(), "mesh geometries")?;
             Ok::<(), BuildError>(())
         })();
-        if let Err(e) = filled {
+        if let Err(e) = allocated {
             mesh.release(budget);
-            return Err(e);
+            return Err(refusal(sources.len()).unwrap_or(e));
         }
-        for src in sources {
-            mesh.starts.push(mesh.tris.len() as u32);
-            mesh.vertex_counts.push(src.vertex_count());
-            for i in 0..src.triangle_count() {
-                let idx = src.triangle(i);
-                mesh.indices.push(idx);
-                mesh.tris
-                    .push(idx.map(|vi| Vec3::from(src.vertex(vi as usize))));
+        for (g, src) in sources.iter().enumerate() {
+            let copied = match src.first_non_finite_vertex() {
+                Some(vertex) => Err(MeshError::NonFiniteVertex { vertex }),
+                None => src.copy_triangles(&mut mesh.tris, &mut mesh.indices),
+            };
+            if let Err(error) = copied {
+                mesh.release(budget);
+                return Err(BuildError::InvalidGeometry { geometry: g, error });
             }
+            mesh.starts
+                .push((mesh.tris.len() - src.triangle_count()) as u32);
+            mesh.vertex_counts.push(src.vertex_count());
         }
         mesh.starts.push(mesh.tris.len() as u32);
         mesh.classify(0..n);
@@ -159,26 +224,38 @@ impl TriMesh {
 
     /// Recomputes the degenerate flags of triangles `range`, then the count and the bounds.
     fn classify(&mut self, range: core::ops::Range<usize>) {
-        for i in range {
-            let word = &mut self.degenerate_bits[i / 32];
-            if is_degenerate(&self.tris[i]) {
-                *word |= 1 << (i % 32);
-            } else {
-                *word &= !(1 << (i % 32));
+        let range = range.start..range.end.min(self.tris.len());
+        for i in range.clone() {
+            let bit = 1 << (i % 32);
+            if let Some(word) = self.degenerate_bits.get_mut(i / 32) {
+                *word = if is_degenerate(&self.tris[i]) {
+                    *word | bit
+                } else {
+                    *word & !bit
+                };
             }
         }
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        let mut degenerate = 0;
-        for (i, tri) in self.tris.iter().enumerate() {
-            if self.degenerate_bits[i / 32] & (1 << (i % 32)) != 0 {
-                degenerate += 1;
-            } else {
-                lo = lo.min(tri[0]).min(tri[1]).min(tri[2]);
-                hi = hi.max(tri[0]).max(tri[1]).max(tri[2]);
+        // Four lanes at a time (the fourth unused); coordinates are finite, so `min`/`max` need no
+        // NaN handling.
+        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+        for (tris, &word) in self.tris.chunks(32).zip(&self.degenerate_bits) {
+            for (i, tri) in tris.iter().enumerate() {
+                if word & (1 << i) == 0 {
+                    let [p, q, r] = tri.map(Vec3A::from);
+                    lo = lo.min(p.min(q).min(r));
+                    hi = hi.max(p.max(q).max(r));
+                }
             }
         }
-        self.degenerate = degenerate;
-        self.bounds = Aabb { min: lo, max: hi };
+        self.degenerate = self
+            .degenerate_bits
+            .iter()
+            .map(|w| w.count_ones() as usize)
+            .sum();
+        self.bounds = Aabb {
+            min: lo.into(),
+            max: hi.into(),
+        };
     }
 
     /// Number of geometries.

@@ -49,6 +49,63 @@ fn out_of_range_indices_are_refused_with_the_triangle() {
     );
 }
 
+/// A refusal does not depend on the memory limit: validation checks the indices while it copies
+/// them, so a copy the limit stops must still find the bad index (and the first bad vertex of an
+/// earlier geometry before it).
+#[test]
+fn refusals_come_before_memory_limits() {
+    let mut data = rayq::procedural::by_name("soup", 2_000).unwrap();
+    let last = data.indices.len() - 1;
+    data.indices[last][1] = data.vertices.len() as u32;
+    let expected = MeshError::IndexOutOfRange {
+        triangle: last,
+        index: data.vertices.len() as u32,
+        vertex_count: data.vertices.len(),
+    };
+    for memory_limit in [0, 1, 1_000] {
+        let options = BuildOptions {
+            memory_limit,
+            ..GRID
+        };
+        assert_eq!(
+            build(&data, &options).err(),
+            Some(BuildError::InvalidMesh(expected.clone()))
+        );
+    }
+    let good = tri();
+    let mut bad_vertex = tri();
+    bad_vertex.vertices[1][2] = f32::NAN;
+    let geometries = |a: &MeshData, b: &MeshData, memory_limit| {
+        let options = BuildOptions {
+            memory_limit,
+            ..GRID
+        };
+        let (a, b) = (a.as_source(), b.as_source());
+        let list = vec![
+            rayq::geometry::Geometry::new(&a),
+            rayq::geometry::Geometry::new(&b),
+        ];
+        Scene::build_geometries(list, &options, Calibration::builtin(), None).err()
+    };
+    // (The list of geometries itself, 32 bytes, is taken before validation.)
+    for memory_limit in [0, 100] {
+        assert_eq!(
+            geometries(&good, &data, memory_limit),
+            Some(BuildError::InvalidGeometry {
+                geometry: 1,
+                error: expected.clone()
+            })
+        );
+        assert_eq!(
+            geometries(&bad_vertex, &data, memory_limit),
+            Some(BuildError::InvalidGeometry {
+                geometry: 0,
+                error: MeshError::NonFiniteVertex { vertex: 1 }
+            })
+        );
+    }
+}
+
 /// Limits below what `structure` needs stop the build with `MemoryLimit`; the smallest limit that
 /// lets it through holds the finished scene.
 fn memory_limit_is_enforced(structure: Structure) {

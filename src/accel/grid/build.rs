@@ -253,26 +253,55 @@ fn fill_lists(
         });
     }
     let blocks = total / 4;
-    let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
-    let mut tris = match budget.filled(blocks, Block4::default(), "triangle packs") {
+    let mut ids = budget.vec::<[u32; 4]>(blocks, "grid references")?;
+    let mut tris = match budget.vec::<Block4>(blocks, "triangle packs") {
         Ok(t) => t,
         Err(e) => {
             budget.free(ids);
             return Err(e);
         }
     };
-    fill(mesh, kept, counts, |slot, prim, tri| {
-        debug_assert!(slot / 4 < blocks);
-        // SAFETY: a slot lies in its cell's list, below the aligned total (`fill`), and both
-        // arrays hold `total / 4` blocks.
-        let (id, block) = unsafe {
-            (
-                ids.get_unchecked_mut(slot / 4),
-                tris.get_unchecked_mut(slot / 4),
-            )
-        };
-        id[slot % 4] = prim;
-        block.set(slot % 4, tri);
-    });
+    // Debug builds mark every id lane, so that a lane the writes below missed shows.
+    const UNWRITTEN: u32 = Hit::INVALID_ID - 1;
+    if cfg!(debug_assertions) {
+        ids.resize(blocks, [UNWRITTEN; 4]);
+        ids.clear();
+    }
+    let (id_ptr, tri_ptr) = (ids.as_mut_ptr(), tris.as_mut_ptr());
+    // Writes `prim` and `tri` into lane `slot % 4` of block `slot / 4`.
+    //
+    // SAFETY (for every call below): `slot < total = 4 · blocks`, and both vectors have room for
+    // `blocks` blocks; the writes go through raw pointers into the reserved, not yet initialised
+    // memory, one lane at a time.
+    let put = |slot: usize, prim: u32, tri: &[glam::Vec3; 3]| unsafe {
+        debug_assert!(slot < total);
+        let (b, lane) = (slot / 4, slot % 4);
+        core::ptr::addr_of_mut!((*id_ptr.add(b))[lane]).write(prim);
+        let v = core::ptr::addr_of_mut!((*tri_ptr.add(b)).v);
+        for (i, p) in tri.iter().enumerate() {
+            for (k, x) in p.to_array().into_iter().enumerate() {
+                core::ptr::addr_of_mut!((*v)[3 * i + k][lane]).write(x);
+            }
+        }
+    };
+    // The gap lanes at the end of each list: `counts[c]` is still the end of cell `c`'s list
+    // (`offsets`), and the next list starts at that end rounded up to a block.
+    const GAP: [glam::Vec3; 3] = [glam::Vec3::NAN; 3];
+    for &end in counts.iter().take(counts.len().saturating_sub(1)) {
+        let end = end as usize;
+        for slot in end..(end + 3) & !3 {
+            put(slot, Hit::INVALID_ID, &GAP);
+        }
+    }
+    fill(mesh, kept, counts, put);
+    // SAFETY: every lane of the `blocks` blocks is written: the slots `0..total` are the cells'
+    // lists one after the other, each list its references (`fill` writes each slot of
+    // `[start, end)` once: it counts each cell down exactly as often as it was counted up) and its
+    // gap lanes up to the next block (written above); an empty cell's list is empty.
+    unsafe {
+        ids.set_len(blocks);
+        tris.set_len(blocks);
+    }
+    debug_assert!(ids.iter().flatten().all(|&id| id != UNWRITTEN));
     Ok(Lists::Packed { ids, tris })
 }
