@@ -191,8 +191,7 @@ impl MemoryBudget {
 }
 
 /// Asks the kernel to back the whole 2 MiB pages inside `v`'s new, untouched allocation with
-/// transparent huge pages, when it holds at least two of them (Linux with `std`; elsewhere
-/// nothing). A build writes each byte of its large arrays once, right after taking them, so their
+/// transparent huge pages, if it holds any (Linux with `std`; elsewhere nothing). A build writes each byte of its large arrays once, right after taking them, so their
 /// first touch is much of a build's time: on the project's VM a fresh 4 KiB page costs about 2 µs
 /// (0.55 ns a byte, against 0.12 ns a byte with the hint; docs/performance.md). Embree gives its
 /// large blocks the same hint. Only advice: a kernel that refuses it changes nothing.
@@ -202,7 +201,7 @@ fn hint_huge_pages<T>(v: &mut Vec<T>) {
     {
         const HUGE: usize = 2 << 20;
         let bytes = v.capacity().saturating_mul(core::mem::size_of::<T>());
-        if bytes >= 2 * HUGE {
+        if bytes >= HUGE {
             let start = v.as_mut_ptr() as usize;
             let lo = start.saturating_add(HUGE - 1) & !(HUGE - 1);
             let hi = start.saturating_add(bytes) & !(HUGE - 1);

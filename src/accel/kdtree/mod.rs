@@ -50,17 +50,20 @@ pub struct KdTreeParams {
 }
 
 impl KdTreeParams {
-    /// The default: a block test priced as one node step (`C_t = 1`, `C_i = 1` per block of four;
-    /// `C_i = 2` changes per-ray instructions by under 5 % on bunny, sibenik, teapot,
-    /// stadium_teapot and dragon_res2 and builds up to 1.5× longer); the exact sweep for nodes of
-    /// at most 16 triangles and binning above (2–4 % more instructions per ray than sweeping exactly
-    /// up to 1 024, for 1.0–2.1× less build); empty-space bonus 0.8 as Wald & Havran; a reference
-    /// share of 64 per triangle, which the SAH's own termination leaves unused on well-shaped scenes.
-    /// Measured with callgrind on camera and bounce rays (docs/design.md, "SAH kd-tree").
+    /// The default: a block test priced at half a node step (`C_t = 1`, `C_i = 0.5` per block of
+    /// four) and empty-space bonus 0.5; the exact sweep for nodes of at most 16 triangles and
+    /// binning above (2–4 % more instructions per ray than sweeping exactly up to 1 024, for
+    /// 1.0–2.1× less build); a reference share of 64 per triangle, which the SAH's own termination
+    /// leaves unused on well-shaped scenes. The costs were chosen by time, not by instructions: a
+    /// node step costs more than its ~33 instructions (the nodes of a deep tree miss the cache),
+    /// and over the evaluation's scenes (29, one thread, timed per ray and per build against
+    /// `C_i = 1`, bonus 0.8, in two runs) this setting traced 4–5 % faster and built 16–17 %
+    /// faster (geometric means; hair 1.7× faster per ray, soup 1.18×; a few small scenes up to
+    /// 9 % slower); docs/performance.md, "kd-tree costs by time".
     pub const DEFAULT: KdTreeParams = KdTreeParams {
         traversal_cost: 1.0,
-        intersection_cost: 1.0,
-        empty_bonus: 0.8,
+        intersection_cost: 0.5,
+        empty_bonus: 0.5,
         max_depth: 0,
         max_leaf_prims: 1,
         max_references_per_triangle: 64.0,
@@ -68,10 +71,11 @@ impl KdTreeParams {
         layout: TriangleLayout::Packed,
     };
 
-    /// A faster build for few rays: tests priced at half a node step, so shallower trees with
-    /// bigger leaves (measured: 0.56–1.0× the default's build instructions, 1–16 % more per ray).
+    /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
+    /// with bigger leaves (measured against the default: 0.75× its build time, 4.7 % slower per
+    /// ray in the geometric mean, up to 1.3× on gears-10k).
     pub const FAST: KdTreeParams = KdTreeParams {
-        intersection_cost: 0.5,
+        intersection_cost: 0.25,
         ..KdTreeParams::DEFAULT
     };
 
