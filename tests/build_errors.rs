@@ -69,7 +69,7 @@ fn refusals_come_before_memory_limits() {
         };
         assert_eq!(
             build(&data, &options).err(),
-            Some(BuildError::InvalidMesh(expected.clone()))
+            Some(BuildError::InvalidMesh(expected))
         );
     }
     let good = tri();
@@ -93,7 +93,7 @@ fn refusals_come_before_memory_limits() {
             geometries(&good, &data, memory_limit),
             Some(BuildError::InvalidGeometry {
                 geometry: 1,
-                error: expected.clone()
+                error: expected
             })
         );
         assert_eq!(
