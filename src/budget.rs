@@ -191,10 +191,11 @@ impl MemoryBudget {
 }
 
 /// Asks the kernel to back the whole 2 MiB pages inside `v`'s new, untouched allocation with
-/// transparent huge pages, if it holds any (Linux with `std`; elsewhere nothing). A build writes each byte of its large arrays once, right after taking them, so their
-/// first touch is much of a build's time: on the project's VM a fresh 4 KiB page costs about 2 µs
-/// (0.55 ns a byte, against 0.12 ns a byte with the hint; docs/performance.md). Embree gives its
-/// large blocks the same hint. Only advice: a kernel that refuses it changes nothing.
+/// transparent huge pages, if it holds any (Linux with `std`; elsewhere nothing). A build writes
+/// each byte of its large arrays once, right after taking them, so their first touch is much of a
+/// build's time: on the project's VM a fresh 4 KiB page costs about 2 µs (0.55 ns a byte, against
+/// 0.12 ns a byte with the hint; docs/performance.md). Embree gives its large blocks the same hint.
+/// Only advice: a kernel that refuses it changes nothing.
 #[inline]
 fn hint_huge_pages<T>(v: &mut Vec<T>) {
     #[cfg(all(feature = "std", target_os = "linux"))]
