@@ -402,3 +402,90 @@ fn a_kd_tree_build_over_its_work_limit_is_abandoned_and_releases_everything() {
         (Structure::Grid, Outcome::OnlineOnGrid)
     );
 }
+
+/// A large closed sphere around a dense cluster at its centre: the library's samples (a camera
+/// outside, bounces off the shell) never see the inside, where the grid lists the whole cluster in
+/// the few cells at the centre and the kd-tree separates it.
+fn cluster_in_a_shell() -> rayq::mesh::MeshData {
+    let mut data = rayq::procedural::closed_sphere(40).transformed(10.0, [0.0; 3]);
+    data.append(&rayq::procedural::random_soup(3000, 5, 0.05).transformed(0.2, [-0.1; 3]));
+    data
+}
+
+/// Rays from the middle of the cluster in all directions: what a camera inside would trace.
+fn rays_from_the_centre(n: usize) -> Vec<rayq::Ray> {
+    let mut rng = rayq::workload::SplitMix64::new(21);
+    (0..n)
+        .map(|_| rayq::Ray::new(rng.next_vec3() * 0.01, rng.unit_vector()))
+        .collect()
+}
+
+/// The renderer's own rays correct a decision made on unrepresentative samples: with a known
+/// budget the library's samples keep the grid, the scene's tapped queries (about 1 in 64) show the
+/// kd-tree paying, and `update` switches — with the same answers before and after.
+#[test]
+fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
+    let data = cluster_in_a_shell();
+    // The grid costs 1 µs per ray plus 1 ns per cell and per test, the kd-tree 1.1 µs, its build
+    // 1 ns per N log2 N: the kd-tree pays only where the grid tests far more than 100 triangles
+    // a ray.
+    let cal = calibration(1100.0, 1.0);
+    let budget = 10_000_000;
+    let mut scene = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
+    let before = scene.report();
+    assert_eq!(
+        (before.structure, before.outcome),
+        (Structure::Grid, Outcome::GridFasterPerRay),
+        "the samples from outside should keep the grid"
+    );
+    let rays = rays_from_the_centre(40_000);
+    let hits: Vec<_> = rays.iter().map(|r| scene.intersect(r)).collect();
+    // Too few tapped rays yet: nothing changes.
+    let mut fresh = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
+    for r in &rays[..64] {
+        fresh.intersect(r);
+    }
+    fresh.update(64, budget).unwrap();
+    assert_eq!(fresh.report().structure, Structure::Grid);
+    assert_eq!(fresh.report().grid_ray_seconds, before.grid_ray_seconds);
+    // Enough: the estimate comes from the tapped rays, and the kd-tree is built.
+    scene
+        .update(rays.len() as u64, budget - rays.len() as u64)
+        .unwrap();
+    let after = scene.report();
+    assert!(
+        after.grid_ray_seconds > 2.0 * before.grid_ray_seconds,
+        "the tapped rays cost the grid more: {} vs {}",
+        after.grid_ray_seconds,
+        before.grid_ray_seconds
+    );
+    assert!(
+        after.break_even_rays < budget as f64,
+        "{}",
+        after.break_even_rays
+    );
+    assert_eq!(
+        (after.structure, after.outcome),
+        (Structure::KdTree, Outcome::OnlineSwitched)
+    );
+    for (r, h) in rays.iter().zip(&hits) {
+        assert_eq!(scene.intersect(r), *h);
+    }
+    // Rays like the samples (from outside) leave the decision alone.
+    let mut outside = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
+    let mesh = mesh_of(&data);
+    let camera = test_rays(&mesh, 200, 0, 3);
+    for r in &camera {
+        outside.intersect(r);
+    }
+    outside.update(camera.len() as u64, budget).unwrap();
+    assert_eq!(outside.report().structure, Structure::Grid);
+    // After the last batch the tap is gone and nothing switches.
+    let mut done = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
+    for r in &rays {
+        done.intersect(r);
+    }
+    done.update(rays.len() as u64, RAYS_REMAINING_NONE).unwrap();
+    done.update(0, budget).unwrap();
+    assert_eq!(done.report().structure, Structure::Grid);
+}

@@ -566,7 +566,11 @@ pub unsafe extern "C" fn rq_scene_report_get(
 /// above W*) that is still on the grid switches to the kd-tree when `rays_remaining` is at least
 /// the estimated W*, or, with the budget unknown, once the time lost on the grid reaches the
 /// kd-tree's estimated build time and, under an AT_MOST bound, the rays that may still come are at
-/// least W* (outcome ONLINE_SWITCHED). The kd-tree is built while the grid is still
+/// least W* (outcome ONLINE_SWITCHED). While AUTO holds the grid the scene keeps about one query in
+/// 64 (by a hash of the ray, up to 1 024); once it holds 256, this call estimates the costs from
+/// those rays instead of the library's samples (the report's estimates and W* change), and a scene
+/// built with a known budget switches too when `rays_remaining` is at least the new W*, keeping the
+/// kd-tree only if it saves work on those rays. The kd-tree is built while the grid is still
 /// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
 /// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
 /// unchanged and usable.

@@ -86,7 +86,8 @@ pub enum rq_outcome {
     RQ_OUTCOME_ABOVE_BREAK_EVEN = 3,
     /// Budget unknown, still on the grid.
     RQ_OUTCOME_ONLINE_ON_GRID = 4,
-    /// Budget unknown, switched to the kd-tree.
+    /// Switched to the kd-tree in `rq_scene_update` (budget unknown or AT_MOST, or the tapped
+    /// queries showed that the kd-tree pays for the rays remaining).
     RQ_OUTCOME_ONLINE_SWITCHED = 5,
 }
 

@@ -15,11 +15,14 @@ use crate::select::decision::{
     kd_tree_confirmed, kd_tree_work_limit, CostEstimate, Decision, OnlineSwitch,
 };
 use crate::select::model::SceneFeatures;
-use crate::select::sample::{sample_kdtree, RaySource, SampleParams};
+use crate::select::sample::{sample_grid, sample_kdtree, RaySource, SampleParams};
 
 mod choose;
+mod tap;
 
 use choose::choose;
+pub use tap::TAP_RAYS;
+use tap::{QueryTap, TAP_MIN_RAYS};
 
 /// Which structure a scene should use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -45,7 +48,8 @@ pub enum Outcome {
     AboveBreakEven,
     /// Budget unknown and the grid is still in use.
     OnlineOnGrid,
-    /// Budget unknown and the scene has switched to the kd-tree.
+    /// The scene switched to the kd-tree in [`Scene::update`] (budget unknown or an upper bound,
+    /// or its own tapped queries showed that the kd-tree pays for the rays remaining).
     OnlineSwitched,
 }
 
@@ -240,6 +244,9 @@ pub struct Scene {
     geometries: Vec<Visibility>,
     /// True when no geometry puts a condition on rays: plain queries skip the conditions.
     plain: bool,
+    /// About one query in 64, kept while `Auto` holds the grid, so that [`Scene::update`] can
+    /// judge the decision on the renderer's own rays (None otherwise).
+    tap: Option<QueryTap>,
 }
 
 /// The report's estimate fields: NaN where nothing was estimated.
@@ -359,6 +366,7 @@ impl Scene {
             calibration: *calibration,
             geometries,
             plain,
+            tap: None,
         };
         scene.take_choice_facts(
             choice.outcome,
@@ -366,6 +374,7 @@ impl Scene {
             choice.online,
             choice.grid_samples,
         );
+        scene.refresh_tap(budget)?;
         scene.refresh_report();
         Ok(scene)
     }
@@ -389,6 +398,29 @@ impl Scene {
         r.break_even_rays = w;
         self.online = online;
         self.grid_samples = grid_samples;
+    }
+
+    /// A tap while `Auto` holds the grid over some triangles (emptied if there was one), none
+    /// otherwise. The tap's buffer is charged to `budget`: one the memory limit has no room for is
+    /// simply not taken (it only improves a later decision); a refusal by the monitor or the
+    /// allocator is the build's error, as for any other allocation.
+    fn refresh_tap(&mut self, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        let wanted = self.options.structure == Structure::Auto
+            && matches!(self.accel, Accel::Grid(_))
+            && self.report.outcome != Outcome::Forced
+            && self.mesh.len() > self.mesh.degenerate_count();
+        match (&mut self.tap, wanted) {
+            (Some(tap), true) => tap.clear(),
+            (None, true) => {
+                self.tap = match QueryTap::new(budget) {
+                    Ok(tap) => tap,
+                    Err(BuildError::MemoryLimit { .. }) => None,
+                    Err(e) => return Err(e),
+                }
+            }
+            (_, false) => self.tap = None,
+        }
+        Ok(())
     }
 
     /// New positions for the vertices of geometry `g` (`vertex(i)` for each of its vertices; same
@@ -431,6 +463,10 @@ impl Scene {
                     choice.online,
                     choice.grid_samples,
                 );
+                // The moved scene stands even without a tap (it only improves a later decision).
+                if self.refresh_tap(&mut budget).is_err() {
+                    self.tap = None;
+                }
                 self.refresh_report();
                 Ok(())
             }
@@ -443,7 +479,10 @@ impl Scene {
 
     /// Bytes the scene holds (mesh, structure, geometries' conditions).
     fn memory_bytes(&self) -> usize {
-        self.mesh.memory_bytes() + self.accel.memory_bytes() + bytes_of(&self.geometries)
+        self.mesh.memory_bytes()
+            + self.accel.memory_bytes()
+            + bytes_of(&self.geometries)
+            + self.tap.as_ref().map_or(0, QueryTap::memory_bytes)
     }
 
     /// Brings the report's structure fields up to date with the structure held.
@@ -471,23 +510,40 @@ impl Scene {
     /// switches to the kd-tree when the remaining budget is at least W*, or, with the budget still
     /// unknown, once the excess paid on the grid reaches the kd-tree's build cost (and, under an
     /// upper bound, the rays that may still come are at least W*). After [`RAYS_REMAINING_NONE`]
-    /// it never switches. The kd-tree is built while the grid is still held (the memory limit must
-    /// hold both); if that fails the scene stays on the grid, unchanged, and the error is returned.
+    /// it never switches.
+    ///
+    /// While `Auto` holds the grid the scene also keeps about one query in 64 (chosen by a hash of
+    /// the ray; up to 1 024). Once it holds 256, this call estimates the costs again from those
+    /// rays instead of the library's samples (the report's estimates change, and W* with them),
+    /// and a scene built with a known budget on the grid switches too when `rays_remaining` is at
+    /// least the new W*: the renderer's own rays correct a decision made on samples that did not
+    /// look like them (a camera inside the scene, short occlusion rays). A kd-tree built then is
+    /// kept only if it saves work on those same rays.
+    ///
+    /// The kd-tree is built while the grid is still held (the memory limit must hold both); if
+    /// that fails the scene stays on the grid, unchanged, and the error is returned.
     pub fn update(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
         if rays_remaining == RAYS_REMAINING_NONE {
             self.online = None;
+            self.tap = None;
             return Ok(());
         }
-        let Some(rule) = self.online.as_mut() else {
-            return Ok(());
-        };
-        let due = rule.record(rays_traced);
-        let switch = if rays_remaining > 0 {
-            let estimate = self.report_estimate();
-            estimate.decide(rays_remaining) == Decision::AboveBreakEven
-        } else {
-            due
+        let tapped = self.estimate_from_tap();
+        let switch = match self.online.as_mut() {
+            Some(rule) => {
+                let due = rule.record(rays_traced);
+                if rays_remaining > 0 {
+                    self.report_estimate().decide(rays_remaining) == Decision::AboveBreakEven
+                } else {
+                    due
+                }
+            }
+            None => {
+                tapped.is_some()
+                    && rays_remaining > 0
+                    && self.report_estimate().decide(rays_remaining) == Decision::AboveBreakEven
+            }
         };
         if !switch {
             return Ok(());
@@ -500,21 +556,67 @@ impl Scene {
         else {
             // Abandoned (see `kd_tree_work_limit`): keep the grid and stop considering the switch.
             self.online = None;
+            self.tap = None;
             return Ok(());
         };
-        if let Some(grid) = &self.grid_samples {
-            let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
-            if !kd_tree_confirmed(&self.calibration, grid, &kd) {
-                // Not worth it after all: keep the grid and stop considering the switch.
-                self.online = None;
-                return Ok(());
+        // The check on the rays the estimate came from: the tapped ones, or the library's.
+        let checked = match (&tapped, &mut self.tap, &self.grid_samples) {
+            (Some(grid), Some(tap), _) => {
+                let kd = sample_kdtree(&tree, &self.mesh, Some(&tap.rays()), &self.options.samples);
+                kd_tree_confirmed(&self.calibration, grid, &kd)
             }
+            (_, _, Some(grid)) => {
+                let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
+                kd_tree_confirmed(&self.calibration, grid, &kd)
+            }
+            _ => true,
+        };
+        if !checked {
+            // Not worth it after all: keep the grid and stop considering the switch.
+            self.online = None;
+            self.tap = None;
+            return Ok(());
         }
         self.accel = Accel::KdTree(tree);
         self.online = None;
+        self.tap = None;
         self.report.outcome = Outcome::OnlineSwitched;
         self.refresh_report();
         Ok(())
+    }
+
+    /// With enough tapped queries on the grid, the estimate from them: the report's estimates and
+    /// the online rule's take it, and the rays' features on the grid are returned (for the check
+    /// of a kd-tree built on it). The tapped rays stay for that check; they are traced again only
+    /// when more have come since.
+    fn estimate_from_tap(&mut self) -> Option<SceneFeatures> {
+        let (Some(tap), Accel::Grid(grid)) = (&mut self.tap, &self.accel) else {
+            return None;
+        };
+        let taken = tap.taken();
+        if taken < TAP_MIN_RAYS {
+            return None;
+        }
+        if let Some((n, features)) = tap.measured {
+            if n == taken {
+                return Some(features);
+            }
+        }
+        let features = sample_grid(grid, &self.mesh, Some(&tap.rays()), &self.options.samples);
+        tap.measured = Some((taken, features));
+        let estimate = self.calibration.estimate(&features);
+        let [g, k, b, w] = estimate_fields(Some(&estimate));
+        let r = &mut self.report;
+        (
+            r.grid_ray_seconds,
+            r.kd_ray_seconds,
+            r.kd_build_seconds,
+            r.break_even_rays,
+        ) = (g, k, b, w);
+        if let Some(rule) = self.online.as_mut() {
+            rule.set_estimate(estimate);
+        }
+        Some(features)
     }
 
     fn report_estimate(&self) -> CostEstimate {
@@ -535,6 +637,7 @@ impl Scene {
     /// every mask and culls nothing itself, `prim` counting across geometries.
     #[inline]
     pub fn intersect(&self, ray: &Ray) -> Hit {
+        self.offer(ray);
         if self.plain {
             self.accel.query().intersect(&self.mesh, ray)
         } else {
@@ -545,6 +648,7 @@ impl Scene {
     /// True when anything is hit in `[tmin, tmax]` (anything the geometries' conditions accept).
     #[inline]
     pub fn occluded(&self, ray: &Ray) -> bool {
+        self.offer(ray);
         if self.plain {
             self.accel.query().occluded(&self.mesh, ray)
         } else {
@@ -558,6 +662,7 @@ impl Scene {
     /// structure. Conditions cost time only per candidate hit, not per triangle tested.
     #[inline]
     pub fn intersect_ex(&self, ray: &RayEx) -> HitEx {
+        self.offer(&ray.ray);
         let hit = if self.sees_plainly(ray) {
             self.accel.query().intersect(&self.mesh, &ray.ray)
         } else {
@@ -570,10 +675,19 @@ impl Scene {
     /// is called for fewer candidates).
     #[inline]
     pub fn occluded_ex(&self, ray: &RayEx) -> bool {
+        self.offer(&ray.ray);
         if self.sees_plainly(ray) {
             self.accel.query().occluded(&self.mesh, &ray.ray)
         } else {
             self.occluded_accepted(ray)
+        }
+    }
+
+    /// Hands `ray` to the tap, if there is one (see [`QueryTap::offer`]).
+    #[inline(always)]
+    fn offer(&self, ray: &Ray) {
+        if let Some(tap) = &self.tap {
+            tap.offer(ray);
         }
     }
 

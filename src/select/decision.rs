@@ -170,6 +170,11 @@ impl OnlineSwitch {
         }
     }
 
+    /// The same rule with better estimates (the rays traced so far and the bound unchanged).
+    pub fn set_estimate(&mut self, estimate: CostEstimate) {
+        self.estimate = estimate;
+    }
+
     /// The most rays that may still come (`u64::MAX` without a bound).
     pub fn rays_that_may_remain(&self) -> u64 {
         if self.max_rays == u64::MAX {
