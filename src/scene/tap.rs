@@ -137,3 +137,62 @@ fn picked(ray: &Ray) -> bool {
         ^ b(ray.dir.z).rotate_left(29);
     h.wrapping_mul(0x9E37_79B1) >> (32 - TAP_SHIFT) == 0
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::workload::SplitMix64;
+
+    fn rays(n: usize, seed: u64) -> alloc::vec::Vec<Ray> {
+        let mut rng = SplitMix64::new(seed);
+        (0..n)
+            .map(|_| Ray::new(rng.next_vec3(), rng.unit_vector()))
+            .collect()
+    }
+
+    /// The tap keeps exactly the picked rays, in the order offered, up to its size; clearing it
+    /// starts over.
+    #[test]
+    fn keeps_the_picked_rays_up_to_its_size() {
+        let mut tap = QueryTap::new(&mut MemoryBudget::new(0)).unwrap().unwrap();
+        let offered = rays(if cfg!(miri) { 2_000 } else { 200_000 }, 3);
+        for r in &offered {
+            tap.offer(r);
+        }
+        let picked: alloc::vec::Vec<Ray> = offered.iter().filter(|r| picked(r)).copied().collect();
+        // About one in 64.
+        let expect = offered.len() / 64;
+        assert!(picked.len() > expect / 2 && picked.len() < expect * 2);
+        let n = picked.len().min(TAP_RAYS);
+        assert_eq!(tap.taken(), n);
+        assert_eq!(tap.rays(), &picked[..n]);
+        tap.clear();
+        assert_eq!(tap.taken(), 0);
+        assert!(tap.rays().is_empty());
+    }
+
+    /// Offers from several threads at once fill distinct slots (what Miri checks for races).
+    #[cfg(feature = "std")]
+    #[test]
+    fn threads_share_a_tap() {
+        extern crate std;
+        let mut tap = QueryTap::new(&mut MemoryBudget::new(0)).unwrap().unwrap();
+        let per_thread = if cfg!(miri) { 500 } else { 20_000 };
+        let sets: alloc::vec::Vec<_> = (0..4).map(|t| rays(per_thread, 10 + t)).collect();
+        std::thread::scope(|s| {
+            for set in &sets {
+                let tap = &tap;
+                s.spawn(move || set.iter().for_each(|r| tap.offer(r)));
+            }
+        });
+        let chosen = sets.iter().flatten().filter(|r| picked(r)).count();
+        assert_eq!(tap.taken(), chosen.min(TAP_RAYS));
+        let mut got: alloc::vec::Vec<Ray> = tap.rays().to_vec();
+        for r in sets.iter().flatten().filter(|r| picked(r)) {
+            if let Some(i) = got.iter().position(|g| g == r) {
+                got.swap_remove(i);
+            }
+        }
+        assert!(got.is_empty(), "the tap holds rays nobody offered");
+    }
+}
