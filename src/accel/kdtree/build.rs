@@ -134,11 +134,6 @@ impl Costs {
             c
         }
     }
-
-    #[inline(always)]
-    fn split(&self, pl: f64, pr: f64, nl: usize, nr: usize) -> f64 {
-        self.interior(pl, pr, self.leaf(nl), self.leaf(nr), nl, nr)
-    }
 }
 
 /// Surface area of a box with edge lengths `e` (f64: small children of large boxes stay exact
@@ -161,37 +156,138 @@ fn probabilities(bbox: &Aabb, axis: usize, pos: f32) -> (f64, f64) {
 
 /// The children's areas along one axis as linear functions of the plane's distance `x` from the
 /// box's lower face: `area(x) = a0 + a1·x` below, `a0 + a1·(extent − x)` above; so pricing a
-/// candidate plane takes two multiply-adds, not two box areas.
+/// candidate plane takes two multiply-adds, not two box areas. In f32, with the areas divided by
+/// the square of the box's longest edge (so they lie in `[0, 6]` whatever the scene's scale).
 #[derive(Clone, Copy)]
 struct Sides {
-    a0: f64,
-    a1: f64,
-    extent: f64,
+    a0: f32,
+    a1: f32,
+    extent: f32,
     lo: f32,
-    /// `1 / area(box)`.
-    inv_sa: f64,
 }
 
 impl Sides {
-    fn new(bbox: &Aabb, axis: usize) -> Sides {
-        let e = bbox.extent().to_array().map(f64::from);
+    /// `scale` is `1 / longest edge` of `bbox` (see [`Pricer::new`]).
+    fn new(bbox: &Aabb, axis: usize, scale: f64) -> Sides {
+        let e = bbox.extent().to_array().map(|x| f64::from(x) * scale);
         let (b, c) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
         Sides {
-            a0: 2.0 * b * c,
-            a1: 2.0 * (b + c),
-            extent: e[axis],
+            a0: (2.0 * b * c) as f32,
+            a1: (2.0 * (b + c) * scale) as f32,
+            extent: bbox.max[axis] - bbox.min[axis],
             lo: bbox.min[axis],
-            inv_sa: 1.0 / area(e),
         }
     }
 
-    /// `(P_L, P_R)` for the plane at `pos`.
+    /// The children's (scaled) areas for the plane at `pos`.
     #[inline(always)]
-    fn at(&self, pos: f32) -> (f64, f64) {
-        let x = f64::from(pos) - f64::from(self.lo);
-        let below = self.a0 + self.a1 * x;
-        let above = self.a0 + self.a1 * (self.extent - x);
-        (below * self.inv_sa, above * self.inv_sa)
+    fn at(&self, pos: f32) -> (f32, f32) {
+        let x = pos - self.lo;
+        (self.a0 + self.a1 * x, self.a0 + self.a1 * (self.extent - x))
+    }
+}
+
+/// Prices a node's candidate planes in f32, in units of the node's (scaled) area: a candidate's
+/// price is its SAH cost times that area, so comparing prices compares costs and no division is
+/// needed per candidate.
+#[derive(Clone, Copy)]
+struct Pricer {
+    /// `C_t · area(box)`.
+    ct_sa: f32,
+    ci: f32,
+    keep: f32,
+    /// `1 / longest edge`, the scale of every [`Sides`] of this node.
+    scale: f64,
+    /// `1 / area(box)` (scaled), to turn the best price back into a cost.
+    inv_sa: f64,
+}
+
+impl Pricer {
+    fn new(costs: &Costs, bbox: &Aabb) -> Pricer {
+        let e = bbox.extent().to_array().map(f64::from);
+        let longest = e[0].max(e[1]).max(e[2]);
+        let scale = if longest > 0.0 { 1.0 / longest } else { 1.0 };
+        let sa = area(e.map(|x| x * scale));
+        Pricer {
+            ct_sa: (costs.ct * sa) as f32,
+            ci: costs.ci as f32,
+            keep: costs.keep as f32,
+            scale,
+            inv_sa: 1.0 / sa,
+        }
+    }
+
+    /// The price of a split whose children have (scaled) areas `al`, `ar` and hold `nl`, `nr`.
+    #[inline(always)]
+    fn price(&self, al: f32, ar: f32, nl: usize, nr: usize) -> f32 {
+        let c = self.ct_sa + self.ci * (al * blocks32(nl) + ar * blocks32(nr));
+        if nl == 0 || nr == 0 {
+            c * self.keep
+        } else {
+            c
+        }
+    }
+}
+
+/// [`blocks`] in f32, for the sweep.
+#[inline(always)]
+fn blocks32(n: usize) -> f32 {
+    n.div_ceil(4) as f32
+}
+
+/// The cheapest candidate so far of a node's split search.
+#[derive(Clone, Copy)]
+struct Best {
+    /// Its price ([`Pricer::price`]); infinite while there is none.
+    price: f32,
+    axis: usize,
+    pos: f32,
+    planar_left: bool,
+    left: usize,
+    right: usize,
+}
+
+impl Best {
+    const NONE: Best = Best {
+        price: f32::INFINITY,
+        axis: 0,
+        pos: 0.0,
+        planar_left: true,
+        left: 0,
+        right: 0,
+    };
+
+    #[inline(always)]
+    fn offer(
+        &mut self,
+        price: f32,
+        axis: usize,
+        pos: f32,
+        planar_left: bool,
+        nl: usize,
+        nr: usize,
+    ) {
+        if price < self.price {
+            *self = Best {
+                price,
+                axis,
+                pos,
+                planar_left,
+                left: nl,
+                right: nr,
+            };
+        }
+    }
+
+    fn split(&self, pricer: &Pricer) -> Option<Split> {
+        (self.price < f32::INFINITY).then(|| Split {
+            axis: self.axis,
+            pos: self.pos,
+            planar_left: self.planar_left,
+            left: self.left,
+            right: self.right,
+            cost: f64::from(self.price) * pricer.inv_sa,
+        })
     }
 }
 
@@ -592,7 +688,8 @@ impl Builder<'_> {
     /// thin axis down to the depth limit.
     fn binned_split(&self, items: &[Item], bbox: &Aabb) -> Option<Split> {
         let n = items.len();
-        let mut best: Option<Split> = None;
+        let pricer = Pricer::new(&self.costs, bbox);
+        let mut best = Best::NONE;
         let (mut tlo, mut thi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
         for it in items {
             for a in 0..3 {
@@ -602,43 +699,37 @@ impl Builder<'_> {
         }
         // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
         let bins = (n / 2).clamp(8, BINS);
-        let mut consider = |axis: usize, pos: f32, nl: usize, nr: usize, sides: &Sides| {
-            if !(bbox.min[axis] < pos && pos < bbox.max[axis]) {
-                return;
-            }
-            let (pl, pr) = sides.at(pos);
-            let cost = self.costs.split(pl, pr, nl, nr);
-            if best.map_or(true, |b| cost < b.cost) {
-                best = Some(Split {
-                    axis,
-                    pos,
-                    planar_left: true,
-                    left: nl,
-                    right: nr,
-                    cost,
-                });
-            }
-        };
         for axis in 0..3 {
-            if !(bbox.min[axis] < bbox.max[axis]) {
+            let (blo, bhi) = (bbox.min[axis], bbox.max[axis]);
+            if !(blo < bhi) {
                 continue;
             }
-            let sides = Sides::new(bbox, axis);
+            let sides = Sides::new(bbox, axis, pricer.scale);
+            let mut consider = |pos: f32, nl: usize, nr: usize| {
+                if blo < pos && pos < bhi {
+                    let (al, ar) = sides.at(pos);
+                    best.offer(pricer.price(al, ar, nl, nr), axis, pos, true, nl, nr);
+                }
+            };
             let (lo, hi) = (tlo[axis], thi[axis]);
             // The empty space below and above the triangles.
-            consider(axis, lo, 0, n, &sides);
-            consider(axis, hi, n, 0, &sides);
+            consider(lo, 0, n);
+            consider(hi, n, 0);
             if !(lo < hi) {
                 continue;
             }
             let scale = bins as f32 / (hi - lo);
+            if !scale.is_finite() {
+                continue;
+            }
             let top = (bins - 1) as f32;
-            // `x` lies in the tight bounds, so `x − lo` is in `[0, hi − lo]` and the clamped bin in
-            // `[0, bins − 1]` (NaN cannot occur: coordinates are finite).
+            // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in
+            // `[0, hi − lo]` (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]`:
+            // finite, not NaN (`scale` is finite and positive).
             let bin = |x: f32| {
-                let b = ((x - lo) * scale).max(0.0).min(top);
-                // SAFETY: `b` is finite and in [0, bins − 1] (clamped just above), where the
-                // conversion is exact.
+                let b = (x - lo) * scale;
+                let b = if b < top { b } else { top };
+                // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
                 unsafe { b.to_int_unchecked::<u32>() as usize }
             };
             let (mut starts, mut ends) = ([0u32; BINS], [0u32; BINS]);
@@ -652,11 +743,11 @@ impl Builder<'_> {
                 nr -= ends[k - 1] as usize;
                 let pos = lo + (hi - lo) * (k as f32 / bins as f32);
                 if lo < pos && pos < hi {
-                    consider(axis, pos, nl, nr, &sides);
+                    consider(pos, nl, nr);
                 }
             }
         }
-        best
+        best.split(&pricer)
     }
 
     /// The best split over every event position strictly inside the box (planar triangles to the
@@ -670,7 +761,8 @@ impl Builder<'_> {
         let n = self.items(depth, side).len();
         let mut events = core::mem::take(&mut self.events);
         let r = grow(self.budget, &mut events, 2 * n, "kd-tree build events");
-        let mut best: Option<Split> = None;
+        let pricer = Pricer::new(&self.costs, bbox);
+        let mut best = Best::NONE;
         if r.is_ok() {
             for axis in 0..3 {
                 let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
@@ -688,59 +780,11 @@ impl Builder<'_> {
                     }
                 }
                 events.sort_unstable();
-                self.sweep(&events, bbox, axis, n, &mut best);
+                sweep(&events, bbox, axis, n, &pricer, &mut best);
             }
         }
         self.events = events;
-        r.map(|()| best)
-    }
-
-    /// Prices every event position of one axis's sorted `events`.
-    fn sweep(
-        &self,
-        events: &[Event],
-        bbox: &Aabb,
-        axis: usize,
-        n: usize,
-        best: &mut Option<Split>,
-    ) {
-        let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
-        let sides = Sides::new(bbox, axis);
-        let (mut nl, mut nr) = (0usize, n);
-        for group in events.chunk_by(|a, b| a >> 2 == b >> 2) {
-            let Some(&first) = group.first() else {
-                continue;
-            };
-            let mut counts = [0usize; 3];
-            for &e in group {
-                counts[(e & 3) as usize] += 1;
-            }
-            let (ends, planars, starts) = (
-                counts[END as usize],
-                counts[PLANAR as usize],
-                counts[START as usize],
-            );
-            nr -= planars + ends;
-            let pos = unordered((first >> 2) as u32);
-            if lo < pos && pos < hi {
-                let (pl, pr) = sides.at(pos);
-                let below = self.costs.split(pl, pr, nl + planars, nr);
-                let above = self.costs.split(pl, pr, nl, nr + planars);
-                let planar_left = below <= above;
-                let cost = below.min(above);
-                if best.map_or(true, |b| cost < b.cost) {
-                    *best = Some(Split {
-                        axis,
-                        pos,
-                        planar_left,
-                        left: nl + if planar_left { planars } else { 0 },
-                        right: nr + if planar_left { 0 } else { planars },
-                        cost,
-                    });
-                }
-            }
-            nl += starts + planars;
-        }
+        r.map(|()| best.split(&pricer))
     }
 
     /// Writes the children's items of the node `levels[depth][side]` into `levels[depth + 1]`
@@ -796,5 +840,52 @@ impl Builder<'_> {
             }
         }
         Ok((left.len(), right.len()))
+    }
+}
+
+/// Prices every event position of one axis's sorted `events` (Wald & Havran's sweep: at each
+/// position the ends, then the planar triangles, then the starts).
+fn sweep(events: &[Event], bbox: &Aabb, axis: usize, n: usize, pricer: &Pricer, best: &mut Best) {
+    let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
+    let sides = Sides::new(bbox, axis, pricer.scale);
+    let (mut nl, mut nr) = (0usize, n);
+    let mut i = 0;
+    while let Some(&first) = events.get(i) {
+        let key = first & !3;
+        let start = i;
+        let mut count = |kind: u64| {
+            let from = i;
+            while events.get(i) == Some(&(key | kind)) {
+                i += 1;
+            }
+            i - from
+        };
+        let ends = count(END);
+        let planars = count(PLANAR);
+        let starts = count(START);
+        if i == start {
+            // No other kind is made; never stall whatever the input.
+            i += 1;
+            continue;
+        }
+        nr -= planars + ends;
+        let pos = unordered((key >> 2) as u32);
+        if lo < pos && pos < hi {
+            let (al, ar) = sides.at(pos);
+            let below = pricer.price(al, ar, nl + planars, nr);
+            if planars == 0 {
+                best.offer(below, axis, pos, true, nl, nr);
+            } else {
+                let above = pricer.price(al, ar, nl, nr + planars);
+                let planar_left = below <= above;
+                let (price, left, right) = if planar_left {
+                    (below, nl + planars, nr)
+                } else {
+                    (above, nl, nr + planars)
+                };
+                best.offer(price, axis, pos, planar_left, left, right);
+            }
+        }
+        nl += starts + planars;
     }
 }
