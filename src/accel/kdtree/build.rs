@@ -703,7 +703,34 @@ impl Builder<'_> {
             }
         }
         // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
-        let bins = (n / 2).clamp(8, BINS);
+        let bins = (n / 4).clamp(8, BINS);
+        let top = (bins - 1) as f32;
+        // Per axis, the bins' scale over the tight bounds; 0 (every item in bin 0, no candidate
+        // priced) where the axis has no inner bin plane.
+        let mut scale = [0.0f32; 3];
+        for a in 0..3 {
+            let s = bins as f32 / (thi[a] - tlo[a]);
+            if tlo[a] < thi[a] && s.is_finite() {
+                scale[a] = s;
+            }
+        }
+        // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in `[0, hi − lo]`
+        // (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]` (`scale` is finite
+        // and not negative), or NaN (`∞ · 0` where `hi − lo` overflows), which the comparison
+        // below turns into `top`.
+        let bin = |x: f32, a: usize| {
+            let b = (x - tlo[a]) * scale[a];
+            let b = if b < top { b } else { top };
+            // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
+            unsafe { b.to_int_unchecked::<u32>() as usize }
+        };
+        let (mut starts, mut ends) = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
+        for it in items {
+            for a in 0..3 {
+                starts[a][bin(it.lo[a], a)] += 1;
+                ends[a][bin(it.hi[a], a)] += 1;
+            }
+        }
         for axis in 0..3 {
             let (blo, bhi) = (bbox.min[axis], bbox.max[axis]);
             if !(blo < bhi) {
@@ -720,32 +747,13 @@ impl Builder<'_> {
             // The empty space below and above the triangles.
             consider(lo, 0, n);
             consider(hi, n, 0);
-            if !(lo < hi) {
+            if scale[axis] == 0.0 {
                 continue;
-            }
-            let scale = bins as f32 / (hi - lo);
-            if !scale.is_finite() {
-                continue;
-            }
-            let top = (bins - 1) as f32;
-            // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in
-            // `[0, hi − lo]` (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]`:
-            // finite, not NaN (`scale` is finite and positive).
-            let bin = |x: f32| {
-                let b = (x - lo) * scale;
-                let b = if b < top { b } else { top };
-                // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
-                unsafe { b.to_int_unchecked::<u32>() as usize }
-            };
-            let (mut starts, mut ends) = ([0u32; BINS], [0u32; BINS]);
-            for it in items {
-                starts[bin(it.lo[axis])] += 1;
-                ends[bin(it.hi[axis])] += 1;
             }
             let (mut nl, mut nr) = (0usize, n);
             for k in 1..bins {
-                nl += starts[k - 1] as usize;
-                nr -= ends[k - 1] as usize;
+                nl += starts[axis][k - 1] as usize;
+                nr -= ends[axis][k - 1] as usize;
                 let pos = lo + (hi - lo) * (k as f32 / bins as f32);
                 if lo < pos && pos < hi {
                     consider(pos, nl, nr);
