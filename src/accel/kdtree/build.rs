@@ -828,22 +828,38 @@ impl Builder<'_> {
         let (axis, pos) = (split.axis, split.pos);
         let d = depth as usize;
         let (above, below) = self.levels.split_at_mut(d + 1);
-        let (Some(parent), Some([left, right])) = (above.get(d), below.first_mut()) else {
+        let (Some(parent), Some([left, right])) = (above.get_mut(d), below.first_mut()) else {
             return Err(BuildError::CapacityExceeded {
                 what: "kd-tree depth",
             });
         };
-        let items = &parent[side & 1];
+        let items = &mut parent[side & 1];
         left.clear();
         right.clear();
-        let what = "kd-tree build triangles";
-        grow(self.budget, left, split.left, what)?;
-        grow(self.budget, right, split.right, what)?;
-        for it in items {
+        // The sides an item goes to (lower, upper).
+        let sides = |it: &Item| {
             let (a, b) = (it.lo[axis], it.hi[axis]);
             let planar = a == b && a == pos;
             let to_left = if planar { split.planar_left } else { a < pos };
             let to_right = if planar { !split.planar_left } else { b > pos };
+            (to_left, to_right)
+        };
+        // A split that leaves one side empty (cutting off empty space) hands the node's items to the
+        // other child as they are: the buffers are swapped, not copied (the node never reads its
+        // items again, and its slot is rewritten before any other node reads it).
+        if items.iter().all(|it| sides(it) == (true, false)) {
+            core::mem::swap(items, left);
+            return Ok((left.len(), 0));
+        }
+        if items.iter().all(|it| sides(it) == (false, true)) {
+            core::mem::swap(items, right);
+            return Ok((0, right.len()));
+        }
+        let what = "kd-tree build triangles";
+        grow(self.budget, left, split.left, what)?;
+        grow(self.budget, right, split.right, what)?;
+        for it in items.iter() {
+            let (to_left, to_right) = sides(it);
             if to_left && to_right {
                 let Some(tri) = self.mesh.triangle(it.prim) else {
                     continue;
