@@ -305,6 +305,81 @@ impl Best {
     }
 }
 
+/// A binned node's per-axis bins over the tight bounds of its items, and the items' lower and
+/// upper bounds counted in them.
+struct BinCounts {
+    /// The items counted.
+    n: usize,
+    tlo: [f32; 3],
+    thi: [f32; 3],
+    /// Bins per axis; `scale[a]` maps `x − tlo[a]` to a bin, 0 (every item in bin 0, no candidate
+    /// priced) where the axis has no inner bin plane.
+    bins: usize,
+    scale: [f32; 3],
+    starts: [[u32; BINS]; 3],
+    ends: [[u32; BINS]; 3],
+}
+
+impl BinCounts {
+    const EMPTY: BinCounts = BinCounts {
+        n: 0,
+        tlo: [0.0; 3],
+        thi: [0.0; 3],
+        bins: 8,
+        scale: [0.0; 3],
+        starts: [[0; BINS]; 3],
+        ends: [[0; BINS]; 3],
+    };
+
+    /// Bins `items` (all three axes in one pass).
+    fn count(&mut self, items: &[Item]) {
+        let n = items.len();
+        let (mut tlo, mut thi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for it in items {
+            for a in 0..3 {
+                tlo[a] = if it.lo[a] < tlo[a] { it.lo[a] } else { tlo[a] };
+                thi[a] = if it.hi[a] > thi[a] { it.hi[a] } else { thi[a] };
+            }
+        }
+        // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
+        let bins = (n / 4).clamp(8, BINS);
+        let top = (bins - 1) as f32;
+        let mut scale = [0.0f32; 3];
+        for a in 0..3 {
+            let s = bins as f32 / (thi[a] - tlo[a]);
+            if tlo[a] < thi[a] && s.is_finite() {
+                scale[a] = s;
+            }
+        }
+        // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in `[0, hi − lo]`
+        // (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]` (`scale` is finite
+        // and not negative), or NaN (`∞ · 0` where `hi − lo` overflows), which the comparison
+        // below turns into `top`.
+        let bin = |x: f32, a: usize| {
+            let b = (x - tlo[a]) * scale[a];
+            let b = if b < top { b } else { top };
+            // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
+            unsafe { b.to_int_unchecked::<u32>() as usize }
+        };
+        let (mut starts, mut ends) = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
+        for it in items {
+            for a in 0..3 {
+                starts[a][bin(it.lo[a], a)] += 1;
+                ends[a][bin(it.hi[a], a)] += 1;
+            }
+        }
+        *self = BinCounts {
+            n,
+            tlo,
+            thi,
+            bins,
+            scale,
+            starts,
+            ends,
+        };
+    }
+}
+
 /// Maps a finite f32 to bits whose unsigned order is the number's order (`-0.0` counts as `0.0`).
 #[inline]
 fn ordered(x: f32) -> u32 {
@@ -383,6 +458,8 @@ struct Builder<'a> {
     levels: Vec<[Vec<Item>; 2]>,
     /// One axis's events of a node that is split by the exact sweep.
     events: Vec<Event>,
+    /// The bins of the last binned node.
+    bins: BinCounts,
     /// Triangle ids of a leaf being made.
     ids: Vec<u32>,
     max_depth: u32,
@@ -430,6 +507,7 @@ pub(super) fn build(
         prims: Vec::new(),
         levels: Vec::new(),
         events: Vec::new(),
+        bins: BinCounts::EMPTY,
         ids: Vec::new(),
         max_depth,
         depth: 0,
@@ -443,7 +521,7 @@ pub(super) fn build(
     let result = b.root_items(live).map_err(Stop::from).and_then(|()| {
         b.budget
             .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
-        b.node(0, 0, LOWER, root, refs_allowed.max(live), 0)
+        b.node(0, 0, LOWER, root, refs_allowed.max(live), 0, false)
     });
     let Builder {
         budget,
@@ -528,7 +606,9 @@ impl Builder<'_> {
 
     /// Builds the subtree of the node whose items are `levels[depth][side]` into node `index` (already
     /// in the array), in `bbox`, allowed `refs_allowed` references, with `bad` bad refines above
-    /// it; returns its SAH cost.
+    /// it; returns its SAH cost. `reuse_bins`: the last binned node's bins are this node's (see
+    /// [`Builder::binned_split`]).
+    #[allow(clippy::too_many_arguments)]
     fn node(
         &mut self,
         index: usize,
@@ -537,6 +617,7 @@ impl Builder<'_> {
         bbox: Aabb,
         refs_allowed: usize,
         mut bad: u32,
+        reuse_bins: bool,
     ) -> Result<f64, Stop> {
         let n = self.items(depth, side).len();
         self.work = self.work.saturating_add(n as u64);
@@ -552,10 +633,11 @@ impl Builder<'_> {
         } else {
             self.max_depth
         };
+        let binned = n > self.params.exact_below as usize;
         let split = if depth >= limit || n <= self.params.max_leaf_prims as usize {
             None
-        } else if n > self.params.exact_below as usize {
-            self.binned_split(self.items(depth, side), &bbox)
+        } else if binned {
+            self.binned_split(depth, side, &bbox, reuse_bins)
         } else {
             self.exact_split(depth, side, &bbox)?
         };
@@ -591,11 +673,22 @@ impl Builder<'_> {
             self.budget
                 .push(&mut self.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         }
-        let (nl, nr) = self.partition(depth, side, &split)?;
+        let (nl, nr, handed) = self.partition(depth, side, &split)?;
+        // The child handed the node's items is built next (the other child, empty, is a leaf at
+        // once), so the bins just counted are still there.
+        let reuse = binned && handed;
         let total = (nl + nr).max(1);
         let share_l = ((refs_allowed as u128 * nl as u128) / total as u128) as usize;
         let share_r = refs_allowed.saturating_sub(share_l);
-        let cost_l = self.node(children, depth + 1, LOWER, left_box, share_l.max(nl), bad)?;
+        let cost_l = self.node(
+            children,
+            depth + 1,
+            LOWER,
+            left_box,
+            share_l.max(nl),
+            bad,
+            reuse && nr == 0,
+        )?;
         let cost_r = self.node(
             children + 1,
             depth + 1,
@@ -603,6 +696,7 @@ impl Builder<'_> {
             right_box,
             share_r.max(nr),
             bad,
+            reuse && nl == 0,
         )?;
         let empty = |node: KdNode| node.is_leaf() && node.count() == 0;
         let empties = (empty(self.nodes[children]), empty(self.nodes[children + 1]));
@@ -703,46 +797,30 @@ impl Builder<'_> {
     /// candidates too (cutting off the empty space around the triangles): planes at arbitrary bin
     /// positions in empty space would cut it again and again, a flat floor's box halving along its
     /// thin axis down to the depth limit.
-    fn binned_split(&self, items: &[Item], bbox: &Aabb) -> Option<Split> {
+    ///
+    /// With `reuse`, the bin counts left by the last binned node are this node's: its parent cut
+    /// off empty space and handed it its items unchanged ([`Builder::partition`]), so the tight
+    /// bounds, the bins and their counts are the same; only the box, so the prices, differ.
+    fn binned_split(&mut self, depth: u32, side: usize, bbox: &Aabb, reuse: bool) -> Option<Split> {
+        let items = self
+            .levels
+            .get(depth as usize)
+            .map_or(&[][..], |l| &l[side & 1][..]);
         let n = items.len();
+        if !(reuse && self.bins.n == n) {
+            self.bins.count(items);
+        }
+        let BinCounts {
+            tlo,
+            thi,
+            scale,
+            bins,
+            ref starts,
+            ref ends,
+            ..
+        } = self.bins;
         let pricer = Pricer::new(&self.costs, bbox);
         let mut best = Best::NONE;
-        let (mut tlo, mut thi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for it in items {
-            for a in 0..3 {
-                tlo[a] = if it.lo[a] < tlo[a] { it.lo[a] } else { tlo[a] };
-                thi[a] = if it.hi[a] > thi[a] { it.hi[a] } else { thi[a] };
-            }
-        }
-        // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
-        let bins = (n / 4).clamp(8, BINS);
-        let top = (bins - 1) as f32;
-        // Per axis, the bins' scale over the tight bounds; 0 (every item in bin 0, no candidate
-        // priced) where the axis has no inner bin plane.
-        let mut scale = [0.0f32; 3];
-        for a in 0..3 {
-            let s = bins as f32 / (thi[a] - tlo[a]);
-            if tlo[a] < thi[a] && s.is_finite() {
-                scale[a] = s;
-            }
-        }
-        // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in `[0, hi − lo]`
-        // (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]` (`scale` is finite
-        // and not negative), or NaN (`∞ · 0` where `hi − lo` overflows), which the comparison
-        // below turns into `top`.
-        let bin = |x: f32, a: usize| {
-            let b = (x - tlo[a]) * scale[a];
-            let b = if b < top { b } else { top };
-            // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
-            unsafe { b.to_int_unchecked::<u32>() as usize }
-        };
-        let (mut starts, mut ends) = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
-        for it in items {
-            for a in 0..3 {
-                starts[a][bin(it.lo[a], a)] += 1;
-                ends[a][bin(it.hi[a], a)] += 1;
-            }
-        }
         for axis in 0..3 {
             let (blo, bhi) = (bbox.min[axis], bbox.max[axis]);
             if !(blo < bhi) {
@@ -818,13 +896,15 @@ impl Builder<'_> {
     }
 
     /// Writes the children's items of the node `levels[depth][side]` into `levels[depth + 1]`
-    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped. Returns the children's counts `(lower, upper)`.
+    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped.
+    /// Returns the children's counts `(lower, upper)` and whether one child was handed the node's
+    /// items unchanged (the other is empty).
     fn partition(
         &mut self,
         depth: u32,
         side: usize,
         split: &Split,
-    ) -> Result<(usize, usize), BuildError> {
+    ) -> Result<(usize, usize, bool), BuildError> {
         let (axis, pos) = (split.axis, split.pos);
         let d = depth as usize;
         let (above, below) = self.levels.split_at_mut(d + 1);
@@ -849,11 +929,11 @@ impl Builder<'_> {
         // items again, and its slot is rewritten before any other node reads it).
         if items.iter().all(|it| sides(it) == (true, false)) {
             core::mem::swap(items, left);
-            return Ok((left.len(), 0));
+            return Ok((left.len(), 0, true));
         }
         if items.iter().all(|it| sides(it) == (false, true)) {
             core::mem::swap(items, right);
-            return Ok((0, right.len()));
+            return Ok((0, right.len(), true));
         }
         let what = "kd-tree build triangles";
         grow(self.budget, left, split.left, what)?;
@@ -885,7 +965,7 @@ impl Builder<'_> {
                 self.budget.push(right, *it, what)?;
             }
         }
-        Ok((left.len(), right.len()))
+        Ok((left.len(), right.len(), false))
     }
 }
 
