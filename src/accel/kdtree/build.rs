@@ -1,18 +1,20 @@
 //! SAH kd-tree construction.
 //!
 //! - **Splits**: nodes of more than `exact_below` triangles choose their plane by min-max binning
-//!   (32 bins per axis over the node's box, each triangle's part counted in the bins of its lower and
-//!   upper bound: Shevtsov et al. 2007, as Mitsuba's `SAHKDTree3D` does above 65 536); smaller nodes
-//!   by the exact SAH over every event position, sorted per node (Wald & Havran's sweep, with end <
-//!   planar < start at equal positions). Either way, the triangles that straddle the plane are
-//!   clipped at it ("perfect splits", [`split_bounds`]), so a child holds only triangles that really
-//!   enter it and bounds of their parts.
+//!   (n/4 bins, 8 to 32, per axis over the tight bounds of the node's items, all three axes in one
+//!   pass, each triangle's part counted in the bins of its lower and upper bound: Shevtsov et al.
+//!   2007, as Mitsuba's `SAHKDTree3D` does above 65 536); smaller nodes by the exact SAH over every
+//!   event position: up to 16 triangles by counting each candidate's sides ([`counted_split`]),
+//!   above by sorting the events per node (Wald & Havran's sweep, with end < planar < start at
+//!   equal positions). Candidates are priced in f32, relative to the node's area. Either way, the
+//!   triangles that straddle the plane are clipped at it ("perfect splits", [`split_bounds`]), so a
+//!   child holds only triangles that really enter it and bounds of their parts.
 //! - **Cost**: `C_t + C_i·(P_L·⌈N_L/4⌉ + P_R·⌈N_R/4⌉)` (times `1 − empty_bonus` when a child is
 //!   empty): the list test takes a leaf's triangles four at a time, so one to four cost the same.
 //! - **Termination** (pbrt's rule): a split no better than a leaf is still taken, as a "bad refine",
-//!   unless the node is small (under 16) and the split more than four times worse, or the path from
-//!   the root already had three; after both children are built, a subtree no cheaper than a leaf
-//!   of its node's triangles is retracted into that leaf (Mitsuba).
+//!   unless the node is small (under 16) and the split more than four times worse, or it has at most
+//!   8 triangles, or the path from the root already had three; after both children are built, a
+//!   subtree no cheaper than a leaf of its node's triangles is retracted into that leaf (Mitsuba).
 //! - **References**: a subtree may hold at most its share of the root's budget
 //!   (`max_references_per_triangle · N`), the share of a child proportional to its triangles, so no
 //!   subtree can spend another's; a node that would exceed its share becomes a leaf and is counted
@@ -50,8 +52,20 @@ const BINS: usize = 32;
 /// at once (pbrt).
 const SMALL_NODE: usize = 16;
 
+/// A node of at most this many triangles (two blocks of the list test) whose best split is no
+/// cheaper than a leaf becomes that leaf, without the bad refine larger nodes may take: below it,
+/// the subtree of a bad refine was nearly always torn down again after being built (at 4 the trees
+/// of bunny, sibenik and spd_teapot were unchanged and the build 0.5–22 % cheaper; at 8 the build is
+/// 12–40 % cheaper for 0.0–1.0 % more instructions per ray, callgrind, docs/performance.md).
+const NO_BAD_REFINE: usize = 8;
+
 /// Nodes of more than this many triangles are not made leaves by the automatic depth limit.
 const DEEP_NODE: usize = 48;
+
+/// Nodes of at most this many triangles are split by counting, for every candidate plane, the
+/// triangles on each side ([`counted_split`]) instead of sorting events: the same candidates and
+/// costs, quadratic in the triangles but branch-free and vectorised, so cheaper than a sort for so few.
+const COUNTED: usize = 16;
 
 /// Bad refines allowed on a path from the root (pbrt, Mitsuba).
 const MAX_BAD_REFINES: u32 = 3;
@@ -134,11 +148,6 @@ impl Costs {
             c
         }
     }
-
-    #[inline(always)]
-    fn split(&self, pl: f64, pr: f64, nl: usize, nr: usize) -> f64 {
-        self.interior(pl, pr, self.leaf(nl), self.leaf(nr), nl, nr)
-    }
 }
 
 /// Surface area of a box with edge lengths `e` (f64: small children of large boxes stay exact
@@ -161,37 +170,213 @@ fn probabilities(bbox: &Aabb, axis: usize, pos: f32) -> (f64, f64) {
 
 /// The children's areas along one axis as linear functions of the plane's distance `x` from the
 /// box's lower face: `area(x) = a0 + a1·x` below, `a0 + a1·(extent − x)` above; so pricing a
-/// candidate plane takes two multiply-adds, not two box areas.
+/// candidate plane takes two multiply-adds, not two box areas. In f32, with the areas divided by
+/// the square of the box's longest edge (so they lie in `[0, 6]` whatever the scene's scale).
 #[derive(Clone, Copy)]
 struct Sides {
-    a0: f64,
-    a1: f64,
-    extent: f64,
+    a0: f32,
+    a1: f32,
+    extent: f32,
     lo: f32,
-    /// `1 / area(box)`.
-    inv_sa: f64,
 }
 
 impl Sides {
-    fn new(bbox: &Aabb, axis: usize) -> Sides {
-        let e = bbox.extent().to_array().map(f64::from);
+    /// `scale` is `1 / longest edge` of `bbox` (see [`Pricer::new`]).
+    fn new(bbox: &Aabb, axis: usize, scale: f64) -> Sides {
+        let e = bbox.extent().to_array().map(|x| f64::from(x) * scale);
         let (b, c) = (e[(axis + 1) % 3], e[(axis + 2) % 3]);
         Sides {
-            a0: 2.0 * b * c,
-            a1: 2.0 * (b + c),
-            extent: e[axis],
+            a0: (2.0 * b * c) as f32,
+            a1: (2.0 * (b + c) * scale) as f32,
+            extent: bbox.max[axis] - bbox.min[axis],
             lo: bbox.min[axis],
-            inv_sa: 1.0 / area(e),
         }
     }
 
-    /// `(P_L, P_R)` for the plane at `pos`.
+    /// The children's (scaled) areas for the plane at `pos`.
     #[inline(always)]
-    fn at(&self, pos: f32) -> (f64, f64) {
-        let x = f64::from(pos) - f64::from(self.lo);
-        let below = self.a0 + self.a1 * x;
-        let above = self.a0 + self.a1 * (self.extent - x);
-        (below * self.inv_sa, above * self.inv_sa)
+    fn at(&self, pos: f32) -> (f32, f32) {
+        let x = pos - self.lo;
+        (self.a0 + self.a1 * x, self.a0 + self.a1 * (self.extent - x))
+    }
+}
+
+/// Prices a node's candidate planes in f32, in units of the node's (scaled) area: a candidate's
+/// price is its SAH cost times that area, so comparing prices compares costs and no division is
+/// needed per candidate.
+#[derive(Clone, Copy)]
+struct Pricer {
+    /// `C_t · area(box)`.
+    ct_sa: f32,
+    ci: f32,
+    keep: f32,
+    /// `1 / longest edge`, the scale of every [`Sides`] of this node.
+    scale: f64,
+    /// `1 / area(box)` (scaled), to turn the best price back into a cost.
+    inv_sa: f64,
+}
+
+impl Pricer {
+    fn new(costs: &Costs, bbox: &Aabb) -> Pricer {
+        let e = bbox.extent().to_array().map(f64::from);
+        let longest = e[0].max(e[1]).max(e[2]);
+        let scale = if longest > 0.0 { 1.0 / longest } else { 1.0 };
+        let sa = area(e.map(|x| x * scale));
+        Pricer {
+            ct_sa: (costs.ct * sa) as f32,
+            ci: costs.ci as f32,
+            keep: costs.keep as f32,
+            scale,
+            inv_sa: 1.0 / sa,
+        }
+    }
+
+    /// The price of a split whose children have (scaled) areas `al`, `ar` and hold `nl`, `nr`.
+    #[inline(always)]
+    fn price(&self, al: f32, ar: f32, nl: usize, nr: usize) -> f32 {
+        let c = self.ct_sa + self.ci * (al * blocks32(nl) + ar * blocks32(nr));
+        if nl == 0 || nr == 0 {
+            c * self.keep
+        } else {
+            c
+        }
+    }
+}
+
+/// [`blocks`] in f32, for the sweep.
+#[inline(always)]
+fn blocks32(n: usize) -> f32 {
+    n.div_ceil(4) as f32
+}
+
+/// The cheapest candidate so far of a node's split search.
+#[derive(Clone, Copy)]
+struct Best {
+    /// Its price ([`Pricer::price`]); infinite while there is none.
+    price: f32,
+    axis: usize,
+    pos: f32,
+    planar_left: bool,
+    left: usize,
+    right: usize,
+}
+
+impl Best {
+    const NONE: Best = Best {
+        price: f32::INFINITY,
+        axis: 0,
+        pos: 0.0,
+        planar_left: true,
+        left: 0,
+        right: 0,
+    };
+
+    #[inline(always)]
+    fn offer(
+        &mut self,
+        price: f32,
+        axis: usize,
+        pos: f32,
+        planar_left: bool,
+        nl: usize,
+        nr: usize,
+    ) {
+        if price < self.price {
+            *self = Best {
+                price,
+                axis,
+                pos,
+                planar_left,
+                left: nl,
+                right: nr,
+            };
+        }
+    }
+
+    fn split(&self, pricer: &Pricer) -> Option<Split> {
+        (self.price < f32::INFINITY).then(|| Split {
+            axis: self.axis,
+            pos: self.pos,
+            planar_left: self.planar_left,
+            left: self.left,
+            right: self.right,
+            cost: f64::from(self.price) * pricer.inv_sa,
+        })
+    }
+}
+
+/// A binned node's per-axis bins over the tight bounds of its items, and the items' lower and
+/// upper bounds counted in them.
+struct BinCounts {
+    /// The items counted.
+    n: usize,
+    tlo: [f32; 3],
+    thi: [f32; 3],
+    /// Bins per axis; `scale[a]` maps `x − tlo[a]` to a bin, 0 (every item in bin 0, no candidate
+    /// priced) where the axis has no inner bin plane.
+    bins: usize,
+    scale: [f32; 3],
+    starts: [[u32; BINS]; 3],
+    ends: [[u32; BINS]; 3],
+}
+
+impl BinCounts {
+    const EMPTY: BinCounts = BinCounts {
+        n: 0,
+        tlo: [0.0; 3],
+        thi: [0.0; 3],
+        bins: 8,
+        scale: [0.0; 3],
+        starts: [[0; BINS]; 3],
+        ends: [[0; BINS]; 3],
+    };
+
+    /// Bins `items` (all three axes in one pass).
+    fn count(&mut self, items: &[Item]) {
+        let n = items.len();
+        let (mut tlo, mut thi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+        for it in items {
+            for a in 0..3 {
+                tlo[a] = if it.lo[a] < tlo[a] { it.lo[a] } else { tlo[a] };
+                thi[a] = if it.hi[a] > thi[a] { it.hi[a] } else { thi[a] };
+            }
+        }
+        // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
+        let bins = (n / 4).clamp(8, BINS);
+        let top = (bins - 1) as f32;
+        let mut scale = [0.0f32; 3];
+        for a in 0..3 {
+            let s = bins as f32 / (thi[a] - tlo[a]);
+            if tlo[a] < thi[a] && s.is_finite() {
+                scale[a] = s;
+            }
+        }
+        // Every item's bounds lie in the tight bounds `[lo, hi]`, so `x − lo` is in `[0, hi − lo]`
+        // (rounding is monotonic) and `(x − lo)·scale` in `[0, bins·(1 + ε)]` (`scale` is finite
+        // and not negative), or NaN (`∞ · 0` where `hi − lo` overflows), which the comparison
+        // below turns into `top`.
+        let bin = |x: f32, a: usize| {
+            let b = (x - tlo[a]) * scale[a];
+            let b = if b < top { b } else { top };
+            // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
+            unsafe { b.to_int_unchecked::<u32>() as usize }
+        };
+        let (mut starts, mut ends) = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
+        for it in items {
+            for a in 0..3 {
+                starts[a][bin(it.lo[a], a)] += 1;
+                ends[a][bin(it.hi[a], a)] += 1;
+            }
+        }
+        *self = BinCounts {
+            n,
+            tlo,
+            thi,
+            bins,
+            scale,
+            starts,
+            ends,
+        };
     }
 }
 
@@ -273,6 +458,8 @@ struct Builder<'a> {
     levels: Vec<[Vec<Item>; 2]>,
     /// One axis's events of a node that is split by the exact sweep.
     events: Vec<Event>,
+    /// The bins of the last binned node.
+    bins: BinCounts,
     /// Triangle ids of a leaf being made.
     ids: Vec<u32>,
     max_depth: u32,
@@ -320,6 +507,7 @@ pub(super) fn build(
         prims: Vec::new(),
         levels: Vec::new(),
         events: Vec::new(),
+        bins: BinCounts::EMPTY,
         ids: Vec::new(),
         max_depth,
         depth: 0,
@@ -333,7 +521,7 @@ pub(super) fn build(
     let result = b.root_items(live).map_err(Stop::from).and_then(|()| {
         b.budget
             .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
-        b.node(0, 0, LOWER, root, refs_allowed.max(live), 0)
+        b.node(0, 0, LOWER, root, refs_allowed.max(live), 0, false)
     });
     let Builder {
         budget,
@@ -418,7 +606,9 @@ impl Builder<'_> {
 
     /// Builds the subtree of the node whose items are `levels[depth][side]` into node `index` (already
     /// in the array), in `bbox`, allowed `refs_allowed` references, with `bad` bad refines above
-    /// it; returns its SAH cost.
+    /// it; returns its SAH cost. `reuse_bins`: the last binned node's bins are this node's (see
+    /// [`Builder::binned_split`]).
+    #[allow(clippy::too_many_arguments)]
     fn node(
         &mut self,
         index: usize,
@@ -427,6 +617,7 @@ impl Builder<'_> {
         bbox: Aabb,
         refs_allowed: usize,
         mut bad: u32,
+        reuse_bins: bool,
     ) -> Result<f64, Stop> {
         let n = self.items(depth, side).len();
         self.work = self.work.saturating_add(n as u64);
@@ -442,10 +633,11 @@ impl Builder<'_> {
         } else {
             self.max_depth
         };
+        let binned = n > self.params.exact_below as usize;
         let split = if depth >= limit || n <= self.params.max_leaf_prims as usize {
             None
-        } else if n > self.params.exact_below as usize {
-            self.binned_split(self.items(depth, side), &bbox)
+        } else if binned {
+            self.binned_split(depth, side, &bbox, reuse_bins)
         } else {
             self.exact_split(depth, side, &bbox)?
         };
@@ -453,7 +645,10 @@ impl Builder<'_> {
             return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
         };
         if !(split.cost < leaf_cost) {
-            if (split.cost > 4.0 * leaf_cost && n < SMALL_NODE) || bad >= MAX_BAD_REFINES {
+            if (split.cost > 4.0 * leaf_cost && n < SMALL_NODE)
+                || bad >= MAX_BAD_REFINES
+                || n <= NO_BAD_REFINE
+            {
                 return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
             }
             bad += 1;
@@ -478,11 +673,22 @@ impl Builder<'_> {
             self.budget
                 .push(&mut self.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         }
-        let (nl, nr) = self.partition(depth, side, &split)?;
+        let (nl, nr, handed) = self.partition(depth, side, &split)?;
+        // The child handed the node's items is built next (the other child, empty, is a leaf at
+        // once), so the bins just counted are still there.
+        let reuse = binned && handed;
         let total = (nl + nr).max(1);
         let share_l = ((refs_allowed as u128 * nl as u128) / total as u128) as usize;
         let share_r = refs_allowed.saturating_sub(share_l);
-        let cost_l = self.node(children, depth + 1, LOWER, left_box, share_l.max(nl), bad)?;
+        let cost_l = self.node(
+            children,
+            depth + 1,
+            LOWER,
+            left_box,
+            share_l.max(nl),
+            bad,
+            reuse && nr == 0,
+        )?;
         let cost_r = self.node(
             children + 1,
             depth + 1,
@@ -490,6 +696,7 @@ impl Builder<'_> {
             right_box,
             share_r.max(nr),
             bad,
+            reuse && nl == 0,
         )?;
         let empty = |node: KdNode| node.is_leaf() && node.count() == 0;
         let empties = (empty(self.nodes[children]), empty(self.nodes[children + 1]));
@@ -590,73 +797,60 @@ impl Builder<'_> {
     /// candidates too (cutting off the empty space around the triangles): planes at arbitrary bin
     /// positions in empty space would cut it again and again, a flat floor's box halving along its
     /// thin axis down to the depth limit.
-    fn binned_split(&self, items: &[Item], bbox: &Aabb) -> Option<Split> {
+    ///
+    /// With `reuse`, the bin counts left by the last binned node are this node's: its parent cut
+    /// off empty space and handed it its items unchanged ([`Builder::partition`]), so the tight
+    /// bounds, the bins and their counts are the same; only the box, so the prices, differ.
+    fn binned_split(&mut self, depth: u32, side: usize, bbox: &Aabb, reuse: bool) -> Option<Split> {
+        let items = self
+            .levels
+            .get(depth as usize)
+            .map_or(&[][..], |l| &l[side & 1][..]);
         let n = items.len();
-        let mut best: Option<Split> = None;
-        let (mut tlo, mut thi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
-        for it in items {
-            for a in 0..3 {
-                tlo[a] = if it.lo[a] < tlo[a] { it.lo[a] } else { tlo[a] };
-                thi[a] = if it.hi[a] > thi[a] { it.hi[a] } else { thi[a] };
-            }
+        if !(reuse && self.bins.n == n) {
+            self.bins.count(items);
         }
-        // Fewer bins for smaller nodes: pricing a candidate costs about what binning an item does.
-        let bins = (n / 2).clamp(8, BINS);
-        let mut consider = |axis: usize, pos: f32, nl: usize, nr: usize, sides: &Sides| {
-            if !(bbox.min[axis] < pos && pos < bbox.max[axis]) {
-                return;
-            }
-            let (pl, pr) = sides.at(pos);
-            let cost = self.costs.split(pl, pr, nl, nr);
-            if best.map_or(true, |b| cost < b.cost) {
-                best = Some(Split {
-                    axis,
-                    pos,
-                    planar_left: true,
-                    left: nl,
-                    right: nr,
-                    cost,
-                });
-            }
-        };
+        let BinCounts {
+            tlo,
+            thi,
+            scale,
+            bins,
+            ref starts,
+            ref ends,
+            ..
+        } = self.bins;
+        let pricer = Pricer::new(&self.costs, bbox);
+        let mut best = Best::NONE;
         for axis in 0..3 {
-            if !(bbox.min[axis] < bbox.max[axis]) {
+            let (blo, bhi) = (bbox.min[axis], bbox.max[axis]);
+            if !(blo < bhi) {
                 continue;
             }
-            let sides = Sides::new(bbox, axis);
+            let sides = Sides::new(bbox, axis, pricer.scale);
+            let mut consider = |pos: f32, nl: usize, nr: usize| {
+                if blo < pos && pos < bhi {
+                    let (al, ar) = sides.at(pos);
+                    best.offer(pricer.price(al, ar, nl, nr), axis, pos, true, nl, nr);
+                }
+            };
             let (lo, hi) = (tlo[axis], thi[axis]);
             // The empty space below and above the triangles.
-            consider(axis, lo, 0, n, &sides);
-            consider(axis, hi, n, 0, &sides);
-            if !(lo < hi) {
+            consider(lo, 0, n);
+            consider(hi, n, 0);
+            if scale[axis] == 0.0 {
                 continue;
-            }
-            let scale = bins as f32 / (hi - lo);
-            let top = (bins - 1) as f32;
-            // `x` lies in the tight bounds, so `x − lo` is in `[0, hi − lo]` and the clamped bin in
-            // `[0, bins − 1]` (NaN cannot occur: coordinates are finite).
-            let bin = |x: f32| {
-                let b = ((x - lo) * scale).max(0.0).min(top);
-                // SAFETY: `b` is finite and in [0, bins − 1] (clamped just above), where the
-                // conversion is exact.
-                unsafe { b.to_int_unchecked::<u32>() as usize }
-            };
-            let (mut starts, mut ends) = ([0u32; BINS], [0u32; BINS]);
-            for it in items {
-                starts[bin(it.lo[axis])] += 1;
-                ends[bin(it.hi[axis])] += 1;
             }
             let (mut nl, mut nr) = (0usize, n);
             for k in 1..bins {
-                nl += starts[k - 1] as usize;
-                nr -= ends[k - 1] as usize;
+                nl += starts[axis][k - 1] as usize;
+                nr -= ends[axis][k - 1] as usize;
                 let pos = lo + (hi - lo) * (k as f32 / bins as f32);
                 if lo < pos && pos < hi {
-                    consider(axis, pos, nl, nr, &sides);
+                    consider(pos, nl, nr);
                 }
             }
         }
-        best
+        best.split(&pricer)
     }
 
     /// The best split over every event position strictly inside the box (planar triangles to the
@@ -670,7 +864,13 @@ impl Builder<'_> {
         let n = self.items(depth, side).len();
         let mut events = core::mem::take(&mut self.events);
         let r = grow(self.budget, &mut events, 2 * n, "kd-tree build events");
-        let mut best: Option<Split> = None;
+        let pricer = Pricer::new(&self.costs, bbox);
+        let mut best = Best::NONE;
+        if n <= COUNTED {
+            self.events = events;
+            counted_split(self.items(depth, side), bbox, &pricer, &mut best);
+            return r.map(|()| best.split(&pricer));
+        }
         if r.is_ok() {
             for axis in 0..3 {
                 let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
@@ -688,88 +888,58 @@ impl Builder<'_> {
                     }
                 }
                 events.sort_unstable();
-                self.sweep(&events, bbox, axis, n, &mut best);
+                sweep(&events, bbox, axis, n, &pricer, &mut best);
             }
         }
         self.events = events;
-        r.map(|()| best)
-    }
-
-    /// Prices every event position of one axis's sorted `events`.
-    fn sweep(
-        &self,
-        events: &[Event],
-        bbox: &Aabb,
-        axis: usize,
-        n: usize,
-        best: &mut Option<Split>,
-    ) {
-        let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
-        let sides = Sides::new(bbox, axis);
-        let (mut nl, mut nr) = (0usize, n);
-        for group in events.chunk_by(|a, b| a >> 2 == b >> 2) {
-            let Some(&first) = group.first() else {
-                continue;
-            };
-            let mut counts = [0usize; 3];
-            for &e in group {
-                counts[(e & 3) as usize] += 1;
-            }
-            let (ends, planars, starts) = (
-                counts[END as usize],
-                counts[PLANAR as usize],
-                counts[START as usize],
-            );
-            nr -= planars + ends;
-            let pos = unordered((first >> 2) as u32);
-            if lo < pos && pos < hi {
-                let (pl, pr) = sides.at(pos);
-                let below = self.costs.split(pl, pr, nl + planars, nr);
-                let above = self.costs.split(pl, pr, nl, nr + planars);
-                let planar_left = below <= above;
-                let cost = below.min(above);
-                if best.map_or(true, |b| cost < b.cost) {
-                    *best = Some(Split {
-                        axis,
-                        pos,
-                        planar_left,
-                        left: nl + if planar_left { planars } else { 0 },
-                        right: nr + if planar_left { 0 } else { planars },
-                        cost,
-                    });
-                }
-            }
-            nl += starts + planars;
-        }
+        r.map(|()| best.split(&pricer))
     }
 
     /// Writes the children's items of the node `levels[depth][side]` into `levels[depth + 1]`
-    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped. Returns the children's counts `(lower, upper)`.
+    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped.
+    /// Returns the children's counts `(lower, upper)` and whether one child was handed the node's
+    /// items unchanged (the other is empty).
     fn partition(
         &mut self,
         depth: u32,
         side: usize,
         split: &Split,
-    ) -> Result<(usize, usize), BuildError> {
+    ) -> Result<(usize, usize, bool), BuildError> {
         let (axis, pos) = (split.axis, split.pos);
         let d = depth as usize;
         let (above, below) = self.levels.split_at_mut(d + 1);
-        let (Some(parent), Some([left, right])) = (above.get(d), below.first_mut()) else {
+        let (Some(parent), Some([left, right])) = (above.get_mut(d), below.first_mut()) else {
             return Err(BuildError::CapacityExceeded {
                 what: "kd-tree depth",
             });
         };
-        let items = &parent[side & 1];
+        let items = &mut parent[side & 1];
         left.clear();
         right.clear();
-        let what = "kd-tree build triangles";
-        grow(self.budget, left, split.left, what)?;
-        grow(self.budget, right, split.right, what)?;
-        for it in items {
+        // The sides an item goes to (lower, upper).
+        let sides = |it: &Item| {
             let (a, b) = (it.lo[axis], it.hi[axis]);
             let planar = a == b && a == pos;
             let to_left = if planar { split.planar_left } else { a < pos };
             let to_right = if planar { !split.planar_left } else { b > pos };
+            (to_left, to_right)
+        };
+        // A split that leaves one side empty (cutting off empty space) hands the node's items to the
+        // other child as they are: the buffers are swapped, not copied (the node never reads its
+        // items again, and its slot is rewritten before any other node reads it).
+        if items.iter().all(|it| sides(it) == (true, false)) {
+            core::mem::swap(items, left);
+            return Ok((left.len(), 0, true));
+        }
+        if items.iter().all(|it| sides(it) == (false, true)) {
+            core::mem::swap(items, right);
+            return Ok((0, right.len(), true));
+        }
+        let what = "kd-tree build triangles";
+        grow(self.budget, left, split.left, what)?;
+        grow(self.budget, right, split.right, what)?;
+        for it in items.iter() {
+            let (to_left, to_right) = sides(it);
             if to_left && to_right {
                 let Some(tri) = self.mesh.triangle(it.prim) else {
                     continue;
@@ -795,6 +965,107 @@ impl Builder<'_> {
                 self.budget.push(right, *it, what)?;
             }
         }
-        Ok((left.len(), right.len()))
+        Ok((left.len(), right.len(), false))
+    }
+}
+
+/// Prices every event position of one axis's sorted `events` (Wald & Havran's sweep: at each
+/// position the ends, then the planar triangles, then the starts).
+fn sweep(events: &[Event], bbox: &Aabb, axis: usize, n: usize, pricer: &Pricer, best: &mut Best) {
+    let (lo, hi) = (bbox.min[axis], bbox.max[axis]);
+    let sides = Sides::new(bbox, axis, pricer.scale);
+    let (mut nl, mut nr) = (0usize, n);
+    let mut i = 0;
+    while let Some(&first) = events.get(i) {
+        let key = first & !3;
+        let start = i;
+        let mut count = |kind: u64| {
+            let from = i;
+            while events.get(i) == Some(&(key | kind)) {
+                i += 1;
+            }
+            i - from
+        };
+        let ends = count(END);
+        let planars = count(PLANAR);
+        let starts = count(START);
+        if i == start {
+            // No other kind is made; never stall whatever the input.
+            i += 1;
+            continue;
+        }
+        nr -= planars + ends;
+        let pos = unordered((key >> 2) as u32);
+        if lo < pos && pos < hi {
+            let (al, ar) = sides.at(pos);
+            let below = pricer.price(al, ar, nl + planars, nr);
+            if planars == 0 {
+                best.offer(below, axis, pos, true, nl, nr);
+            } else {
+                let above = pricer.price(al, ar, nl, nr + planars);
+                let planar_left = below <= above;
+                let (price, left, right) = if planar_left {
+                    (below, nl + planars, nr)
+                } else {
+                    (above, nl, nr + planars)
+                };
+                best.offer(price, axis, pos, planar_left, left, right);
+            }
+        }
+        nl += starts + planars;
+    }
+}
+
+/// The exact SAH over every event position strictly inside the box, as [`sweep`] prices it (the
+/// planar triangles at a position to the cheaper side), for a node of at most [`COUNTED`] items: for
+/// each candidate (every item's lower and upper bound) the items below, above and in the plane
+/// are counted over fixed-size arrays (padding that counts nowhere), in the order of the items.
+fn counted_split(items: &[Item], bbox: &Aabb, pricer: &Pricer, best: &mut Best) {
+    let n = items.len();
+    if n > COUNTED {
+        return;
+    }
+    for axis in 0..3 {
+        let (blo, bhi) = (bbox.min[axis], bbox.max[axis]);
+        if !(blo < bhi) {
+            continue;
+        }
+        let sides = Sides::new(bbox, axis, pricer.scale);
+        // Padding: `lo < p`, `hi > p` and `lo == p == hi` are false for every finite `p`.
+        let (mut lo, mut hi) = ([f32::INFINITY; COUNTED], [f32::NEG_INFINITY; COUNTED]);
+        for ((l, h), it) in lo.iter_mut().zip(hi.iter_mut()).zip(items) {
+            *l = it.lo[axis];
+            *h = it.hi[axis];
+        }
+        let m = n.next_multiple_of(4).min(COUNTED);
+        for &p in lo.iter().take(n).chain(hi.iter().take(n)) {
+            if !(blo < p && p < bhi) {
+                continue;
+            }
+            let (mut below, mut above, mut planar) = ([0u32; 4], [0u32; 4], [0u32; 4]);
+            for (l4, h4) in lo[..m].chunks_exact(4).zip(hi[..m].chunks_exact(4)) {
+                for k in 0..4 {
+                    below[k] += u32::from(l4[k] < p);
+                    above[k] += u32::from(h4[k] > p);
+                    planar[k] += u32::from((l4[k] == p) & (h4[k] == p));
+                }
+            }
+            let sum = |c: [u32; 4]| (c[0] + c[1] + c[2] + c[3]) as usize;
+            let (nl, nr, np) = (sum(below), sum(above), sum(planar));
+            let (al, ar) = sides.at(p);
+            let price_below = pricer.price(al, ar, nl + np, nr);
+            if np == 0 {
+                best.offer(price_below, axis, p, true, nl, nr);
+            } else {
+                let price_above = pricer.price(al, ar, nl, nr + np);
+                let planar_left = price_below <= price_above;
+                let (price, left, right) = if planar_left {
+                    (price_below, nl + np, nr)
+                } else {
+                    (price_above, nl, nr + np)
+                };
+                best.offer(price, axis, p, planar_left, left, right);
+            }
+        }
     }
 }

@@ -181,36 +181,41 @@ fn clip_plane<const A: usize>(
 /// triangle in each child (a subset of both the part in the node and the part on that side of the
 /// plane), and is at most the box [`clipped_bounds`] gives plus what the node's box already cut.
 /// A side the triangle does not reach is [`Aabb::EMPTY`].
+///
+/// The vertices are f32 already, so only the edge crossings are computed (in f64) and rounded; the
+/// crossing's coordinate on `axis` is `pos` itself.
 pub(super) fn split_bounds(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) -> (Aabb, Aabb) {
-    let p = tri.map(|v| [f64::from(v.x), f64::from(v.y), f64::from(v.z)]);
-    let plane = f64::from(pos);
-    let (mut lo, mut hi) = (
-        [[f64::INFINITY; 3], [f64::INFINITY; 3]],
-        [[f64::NEG_INFINITY; 3], [f64::NEG_INFINITY; 3]],
-    );
-    let mut add = |side: usize, q: &[f64; 3]| {
+    let v = tri.map(|v| v.to_array());
+    let mut lo = [[f32::INFINITY; 3]; 2];
+    let mut hi = [[f32::NEG_INFINITY; 3]; 2];
+    let add = |lo: &mut [f32; 3], hi: &mut [f32; 3], ql: &[f32; 3], qh: &[f32; 3]| {
         for k in 0..3 {
-            lo[side][k] = lo[side][k].min(q[k]);
-            hi[side][k] = hi[side][k].max(q[k]);
+            lo[k] = if ql[k] < lo[k] { ql[k] } else { lo[k] };
+            hi[k] = if qh[k] > hi[k] { qh[k] } else { hi[k] };
         }
     };
+    let ([lo0, lo1], [hi0, hi1]) = (&mut lo, &mut hi);
     for i in 0..3 {
-        let (a, b) = (&p[i], &p[(i + 1) % 3]);
-        if a[axis] <= plane {
-            add(0, a);
+        let (a, b) = (&v[i], &v[(i + 1) % 3]);
+        if a[axis] <= pos {
+            add(lo0, hi0, a, a);
         }
-        if a[axis] >= plane {
-            add(1, a);
+        if a[axis] >= pos {
+            add(lo1, hi1, a, a);
         }
-        if (a[axis] < plane) != (b[axis] < plane) && a[axis] != plane && b[axis] != plane {
-            let t = (plane - a[axis]) / (b[axis] - a[axis]);
-            let mut x = [0.0; 3];
+        if (a[axis] < pos) != (b[axis] < pos) && a[axis] != pos && b[axis] != pos {
+            let (a, b) = (a.map(f64::from), b.map(f64::from));
+            let t = (f64::from(pos) - a[axis]) / (b[axis] - a[axis]);
+            let (mut xl, mut xh) = ([pos; 3], [pos; 3]);
             for k in 0..3 {
-                x[k] = a[k] + (b[k] - a[k]) * t;
+                if k != axis {
+                    let x = a[k] + (b[k] - a[k]) * t;
+                    xl[k] = round_down(x);
+                    xh[k] = round_up(x);
+                }
             }
-            x[axis] = plane;
-            add(0, &x);
-            add(1, &x);
+            add(lo0, hi0, &xl, &xh);
+            add(lo1, hi1, &xl, &xh);
         }
     }
     let side = |s: usize| {
@@ -218,14 +223,8 @@ pub(super) fn split_bounds(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) 
             return Aabb::EMPTY;
         }
         let mut b = Aabb {
-            min: Vec3::new(
-                round_down(lo[s][0]),
-                round_down(lo[s][1]),
-                round_down(lo[s][2]),
-            )
-            .max(part.min),
-            max: Vec3::new(round_up(hi[s][0]), round_up(hi[s][1]), round_up(hi[s][2]))
-                .min(part.max),
+            min: Vec3::from(lo[s]).max(part.min),
+            max: Vec3::from(hi[s]).min(part.max),
         };
         if s == 0 {
             b.max[axis] = b.max[axis].min(pos);
