@@ -107,24 +107,25 @@ const TARGET_ARCH: &str = "aarch64";
 const TARGET_ARCH: &str = "other";
 
 /// The calibration compiled into the library: fitted by `cargo run --release --example calibrate`
-/// (its defaults: the bundled scenes plus the procedural set) on the project's 2-core x86-64 VM, at
-/// commit 3c02c4c (the exact test, the kd-tree and grid of issues 12 and 13); `calib/default.rqcal`
-/// holds the same values as a blob (a test keeps the two identical). A refit after the list test's
-/// last speed-up chose the variant without a cell price ("grid tests only", leave-one-out W* error
-/// 90 %; this fit had 33 % on the code it was fitted on), which would leave the check after a kd-tree build
-/// (`decision::kd_tree_confirmed`) without a step price; this fit was kept.
+/// (its defaults: the bundled scenes plus the procedural set, 23 scenes) on the project's 2-core
+/// x86-64 VM (an AMD EPYC since stop 19), at commit 1239b2f (the kd-tree's costs chosen by time and
+/// its faster build, the one-pass mesh validation); `calib/default.rqcal` holds the same values as
+/// a blob (a test keeps the two identical). The fit chose the variant "all terms" (leave-one-out W*
+/// error median 77.7 % on its 23 scenes; the earlier "kd ray constant" fit: 100 %), with a price
+/// for both cells and tests, which the check after a kd-tree build (`decision::kd_tree_confirmed`)
+/// needs. The kd-tree's build constant fell from 183 to 81 ns per N·log2 N with its faster build.
 pub const BUILTIN: Calibration = Calibration {
     machine: 0,
     build: 0,
     values: [
-        94.23769999994391,
-        151.55085101034587,
-        15.331145073852412,
-        4.099624312952752,
-        183.2103175619285,
-        1655.5031976290586,
+        80.33021102497801,
+        108.6369807684467,
+        13.49916073252044,
+        3.5928570966924154,
+        80.82321347268092,
         0.0,
-        0.0,
+        44.439548301727434,
+        82.66127009963651,
     ],
 };
 
