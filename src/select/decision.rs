@@ -80,7 +80,7 @@ impl CostEstimate {
 /// What a kd-tree node visit costs relative to a grid cell step in [`kd_tree_confirmed`]: a cell step
 /// also reads the cell's reference range and touches its triangles, a node visit is a few compares
 /// on 8 bytes.
-pub const KD_NODE_PER_CELL_STEP: f64 = 0.5;
+pub const KD_NODE_PER_CELL_STEP: f64 = 0.35;
 
 /// What a triangle the kd-tree tests costs relative to one the grid tests in [`kd_tree_confirmed`]:
 /// more, because kd leaves hold a few triangles each, so every counted test carries a share of a
@@ -88,12 +88,14 @@ pub const KD_NODE_PER_CELL_STEP: f64 = 0.5;
 /// grid cell's longer list spreads its overhead, and the grid's count includes the triangles its
 /// mailbox skips for almost nothing. Fitted with the node price on 31 scenes (the evaluation's set;
 /// the library's sample rays' counted work on both structures against the measured per-ray times of
-/// the evaluation's workload; docs/design.md, "Selector"): with 0.5 and 2 the check keeps the faster
-/// structure on 27 of 31 scenes (leave-one-out the same), the 4 it gets wrong within 8 % per ray
-/// but stadium-1M (the kd-tree 1.9× faster there: its grid's time per ray is set by cache misses
-/// the counts do not see). With the tests priced alike it keeps the slower structure on slivers (a
-/// kd-tree 2× slower per ray).
-pub const KD_TEST_PER_GRID_TEST: f64 = 2.0;
+/// the evaluation's workload, thread CPU, one quiet run; docs/design.md, "Selector"). Refitted at
+/// stop 19 for the kd-trees whose costs were chosen by time (bigger leaves, fewer nodes): with 0.35
+/// and 1.4 the check keeps the faster structure on 29 of 31 scenes (leave-one-out 28), wrong only on
+/// rocker_arm (the two equally fast) and stadium-1M (the kd-tree 1.7× faster there: its grid's time
+/// per ray is set by cache misses the counts do not see); the earlier 0.5 and 2 dropped seven
+/// kd-trees 6–40 % faster than the grid with these trees. With the tests priced alike it keeps the
+/// slower structure on slivers.
+pub const KD_TEST_PER_GRID_TEST: f64 = 1.4;
 
 /// The check after a kd-tree was built on an estimate: keep it only if its counted work on the
 /// sample rays costs less than the grid's did on the same rays (`grid` and `kd` from
