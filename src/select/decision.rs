@@ -121,7 +121,9 @@ pub fn kd_tree_confirmed(
 /// selector abandons it. Measured on the evaluation's 31 scenes (`KdTree::build_work`): 1.3–3.9 on
 /// every scene whose kd-tree is worth having (spd_teapot and gears the highest), 6.8 on hair and
 /// 15 on slivers, whose kd-trees duplicate triangles at every level and trace 2× slower than the
-/// grid. 5 stops those builds at 35–75 % of their work with room above the rest.
+/// grid. 5 stops those builds at 35–75 % of their work with room above the rest. Re-measured at
+/// stop 19 with the costs chosen by time: 1.2–2.7 on the worthwhile trees, 3.6 on hair (whose build
+/// now completes and is dropped by the check after it), 10–15 on slivers.
 pub const KD_WORK_PER_N_LOG_N: f64 = 5.0;
 
 /// The floor of [`kd_tree_work_limit`] per triangle, so that tiny scenes (where `log2 N` is near 0)
