@@ -387,17 +387,21 @@ impl Scene {
         online: Option<OnlineSwitch>,
         grid_samples: Option<SceneFeatures>,
     ) {
-        let [g, k, b, w] = estimate_fields(estimate.as_ref());
+        self.report.outcome = outcome;
+        self.take_estimate(estimate.as_ref());
+        self.online = online;
+        self.grid_samples = grid_samples;
+    }
+
+    /// The report's estimate fields from `estimate` (NaN where there is none).
+    fn take_estimate(&mut self, estimate: Option<&CostEstimate>) {
         let r = &mut self.report;
-        (
-            r.outcome,
+        [
             r.grid_ray_seconds,
             r.kd_ray_seconds,
             r.kd_build_seconds,
-        ) = (outcome, g, k, b);
-        r.break_even_rays = w;
-        self.online = online;
-        self.grid_samples = grid_samples;
+            r.break_even_rays,
+        ] = estimate_fields(estimate);
     }
 
     /// A tap while `Auto` holds the grid over some triangles (emptied if there was one), none
@@ -605,14 +609,7 @@ impl Scene {
         let features = sample_grid(grid, &self.mesh, Some(&tap.rays()), &self.options.samples);
         tap.measured = Some((taken, features));
         let estimate = self.calibration.estimate(&features);
-        let [g, k, b, w] = estimate_fields(Some(&estimate));
-        let r = &mut self.report;
-        (
-            r.grid_ray_seconds,
-            r.kd_ray_seconds,
-            r.kd_build_seconds,
-            r.break_even_rays,
-        ) = (g, k, b, w);
+        self.take_estimate(Some(&estimate));
         if let Some(rule) = self.online.as_mut() {
             rule.set_estimate(estimate);
         }

@@ -231,7 +231,9 @@ impl Pricer {
         }
     }
 
-    /// The price of a split whose children have (scaled) areas `al`, `ar` and hold `nl`, `nr`.
+    /// The price of a split whose children have (scaled) areas `al`, `ar` and hold `nl`, `nr`:
+    /// [`Costs::interior`] with leaf children ([`Costs::leaf`]) times the node's scaled area, in f32
+    /// (the test below keeps the two the same).
     #[inline(always)]
     fn price(&self, al: f32, ar: f32, nl: usize, nr: usize) -> f32 {
         let c = self.ct_sa + self.ci * (al * blocks32(nl) + ar * blocks32(nr));
@@ -290,6 +292,34 @@ impl Best {
                 left: nl,
                 right: nr,
             };
+        }
+    }
+
+    /// Offers the plane at `pos` on `axis` with `nl` items below it, `nr` above and `np` in it
+    /// (children of scaled areas `al`, `ar`): the planar items go to the cheaper side, the lower
+    /// one on a tie.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments)]
+    fn offer_plane(
+        &mut self,
+        pricer: &Pricer,
+        (al, ar): (f32, f32),
+        axis: usize,
+        pos: f32,
+        nl: usize,
+        nr: usize,
+        np: usize,
+    ) {
+        let below = pricer.price(al, ar, nl + np, nr);
+        if np == 0 {
+            self.offer(below, axis, pos, true, nl, nr);
+            return;
+        }
+        let above = pricer.price(al, ar, nl, nr + np);
+        if below <= above {
+            self.offer(below, axis, pos, true, nl + np, nr);
+        } else {
+            self.offer(above, axis, pos, false, nl, nr + np);
         }
     }
 
@@ -997,20 +1027,7 @@ fn sweep(events: &[Event], bbox: &Aabb, axis: usize, n: usize, pricer: &Pricer, 
         nr -= planars + ends;
         let pos = unordered((key >> 2) as u32);
         if lo < pos && pos < hi {
-            let (al, ar) = sides.at(pos);
-            let below = pricer.price(al, ar, nl + planars, nr);
-            if planars == 0 {
-                best.offer(below, axis, pos, true, nl, nr);
-            } else {
-                let above = pricer.price(al, ar, nl, nr + planars);
-                let planar_left = below <= above;
-                let (price, left, right) = if planar_left {
-                    (below, nl + planars, nr)
-                } else {
-                    (above, nl, nr + planars)
-                };
-                best.offer(price, axis, pos, planar_left, left, right);
-            }
+            best.offer_plane(pricer, sides.at(pos), axis, pos, nl, nr, planars);
         }
         nl += starts + planars;
     }
@@ -1052,20 +1069,45 @@ fn counted_split(items: &[Item], bbox: &Aabb, pricer: &Pricer, best: &mut Best) 
             }
             let sum = |c: [u32; 4]| (c[0] + c[1] + c[2] + c[3]) as usize;
             let (nl, nr, np) = (sum(below), sum(above), sum(planar));
-            let (al, ar) = sides.at(p);
-            let price_below = pricer.price(al, ar, nl + np, nr);
-            if np == 0 {
-                best.offer(price_below, axis, p, true, nl, nr);
-            } else {
-                let price_above = pricer.price(al, ar, nl, nr + np);
-                let planar_left = price_below <= price_above;
-                let (price, left, right) = if planar_left {
-                    (price_below, nl + np, nr)
-                } else {
-                    (price_above, nl, nr + np)
-                };
-                best.offer(price, axis, p, planar_left, left, right);
-            }
+            best.offer_plane(pricer, sides.at(p), axis, p, nl, nr, np);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::workload::SplitMix64;
+
+    /// The f32 candidate price is the cost model's split cost with leaf children, scaled by the
+    /// node's area: one SAH, at two precisions (relative error below 1e-5 on boxes from 1e-20 to
+    /// 1e20, both sides empty or not).
+    #[test]
+    fn candidate_price_is_the_cost_model() {
+        let costs = Costs {
+            ct: 1.0,
+            ci: 0.5,
+            keep: 0.5,
+        };
+        let mut rng = SplitMix64::new(9);
+        for i in 0..20_000 {
+            let scale = 10f32.powi((i % 41) - 20);
+            let a = rng.next_vec3() * scale;
+            let b = a + (rng.next_vec3() + glam::Vec3::splat(0.01)) * scale;
+            let bbox = Aabb { min: a, max: b };
+            let axis = i as usize % 3;
+            let pos = a[axis] + rng.next_f32() * (b[axis] - a[axis]);
+            let (nl, nr) = (rng.below(40), rng.below(40));
+            let pricer = Pricer::new(&costs, &bbox);
+            let sides = Sides::new(&bbox, axis, pricer.scale);
+            let (al, ar) = sides.at(pos);
+            let price = f64::from(pricer.price(al, ar, nl, nr)) * pricer.inv_sa;
+            let (pl, pr) = probabilities(&bbox, axis, pos);
+            let cost = costs.interior(pl, pr, costs.leaf(nl), costs.leaf(nr), nl, nr);
+            assert!(
+                (price - cost).abs() <= 1e-5 * cost,
+                "{bbox:?} axis {axis} at {pos}: price {price} cost {cost}"
+            );
         }
     }
 }
