@@ -30,11 +30,13 @@ struct Args {
     load: Option<PathBuf>,
     procedural: bool,
     params: MeasureParams,
+    /// Fit this model variant (a name from `VARIANTS`) instead of the one with the lowest error.
+    variant: Option<String>,
 }
 
 fn usage() -> ! {
     eprintln!(
-        "usage: calibrate [SCENE.obj | DIR]... [-o OUT.rqcal] [--no-procedural] [--side N] [--repeats K] [--save FILE | --load FILE]"
+        "usage: calibrate [SCENE.obj | DIR]... [-o OUT.rqcal] [--no-procedural] [--side N] [--repeats K] [--save FILE | --load FILE] [--variant NAME]"
     );
     std::process::exit(2)
 }
@@ -47,6 +49,7 @@ fn parse() -> Args {
         load: None,
         procedural: true,
         params: MeasureParams::DEFAULT,
+        variant: None,
     };
     let mut it = std::env::args().skip(1);
     while let Some(arg) = it.next() {
@@ -55,6 +58,7 @@ fn parse() -> Args {
             "--no-procedural" => a.procedural = false,
             "--save" => a.save = Some(it.next().map(PathBuf::from).unwrap_or_else(|| usage())),
             "--load" => a.load = Some(it.next().map(PathBuf::from).unwrap_or_else(|| usage())),
+            "--variant" => a.variant = Some(it.next().unwrap_or_else(|| usage())),
             "--side" => {
                 a.params.workload_side = it
                     .next()
@@ -133,8 +137,8 @@ fn name_of(p: &Path) -> String {
 fn to_line(name: &str, o: &Observation) -> String {
     let f = |x: &rayq::select::model::SceneFeatures| {
         format!(
-            "{} {} {} {} {}",
-            x.triangles, x.rays, x.hits, x.cells, x.tests
+            "{} {} {} {} {} {}",
+            x.triangles, x.rays, x.hits, x.cells, x.tests, x.grid_references
         )
     };
     format!(
@@ -159,6 +163,7 @@ fn from_line(line: &str) -> Option<(String, Observation)> {
             hits: w.next()?.parse().ok()?,
             cells: w.next()?.parse().ok()?,
             tests: w.next()?.parse().ok()?,
+            grid_references: w.next()?.parse().ok()?,
         })
     };
     let workload = feat()?;
@@ -279,7 +284,19 @@ fn report_and_write(args: &Args, obs: &[(String, Observation)]) {
             100.0 * max
         );
     }
-    let (chosen, terms, _) = best_variant(&all);
+    let (chosen, terms) = match &args.variant {
+        Some(name) => match VARIANTS.iter().find(|(label, _)| label == name) {
+            Some(&(label, terms)) => (label, terms),
+            None => {
+                eprintln!("no model variant named {name:?}");
+                std::process::exit(2)
+            }
+        },
+        None => {
+            let (label, terms, _) = best_variant(&all);
+            (label, terms)
+        }
+    };
     let mut errs = cross_validated_errors(&all, &terms, 0, GridCost::Clock);
     let max = errs.iter().copied().fold(0.0, f64::max);
     println!(

@@ -6,13 +6,14 @@ mod common;
 use common::{mesh_of, reference_hits, test_rays};
 use rayq::scene::Outcome;
 use rayq::select::calibration::Calibration;
+use rayq::select::decision::TRIAL_SHARE;
 use rayq::{BudgetKind, BuildError, BuildOptions, Scene, Structure, RAYS_REMAINING_NONE};
 
 /// A calibration in which the kd-tree costs `kd_ray` ns per ray and `build` ns per N log2 N, and the
 /// grid 1 µs per ray plus 1 ns per cell and per test (which the check after a kd-tree build prices
 /// both structures' counted work with).
 fn calibration(kd_ray: f64, build: f64) -> Calibration {
-    Calibration::new(0, [10.0, 1000.0, 1.0, 1.0, build, kd_ray, 0.0, kd_ray]).unwrap()
+    Calibration::new(0, [10.0, 1000.0, 1.0, 1.0, build, kd_ray, 0.0, kd_ray, 0.0]).unwrap()
 }
 
 /// A scene on which the kd-tree saves work (counted on the library's sample rays: 9.3 cells and 38.7
@@ -75,12 +76,27 @@ fn each_outcome_of_a_known_budget() {
     );
     assert!(r.kd_node_count > 0 && r.grid_resolution == [0; 3]);
 
-    let slow_kd = calibration(5000.0, 10.0);
-    let scene = Scene::build(&data.as_source(), &auto(u64::MAX), &slow_kd).unwrap();
-    let r = scene.report();
+    // A kd-tree estimated slower per ray: the grid, up to the budget at which its build costs a
+    // sixteenth of the grid's time; from there a trial build, which the check keeps on this scene
+    // (the kd-tree saves work on the samples whatever the estimate said).
+    let slow_kd = calibration(5000.0, 100.0);
+    let probe = Scene::build(&data.as_source(), &auto(0), &slow_kd).unwrap();
+    let e = probe.report();
+    assert_eq!(e.break_even_rays, f64::INFINITY);
+    let trial = e.kd_build_seconds / (TRIAL_SHARE * e.grid_ray_seconds);
+    assert!(trial > 128.0 * 24.0 * 24.0, "{trial}");
+    let below = Scene::build(&data.as_source(), &auto(trial as u64 - 1), &slow_kd).unwrap();
+    let r = below.report();
     assert_eq!(
         (r.structure, r.outcome),
         (Structure::Grid, Outcome::GridFasterPerRay)
+    );
+    assert_eq!(r.break_even_rays, f64::INFINITY);
+    let scene = Scene::build(&data.as_source(), &auto(trial.ceil() as u64), &slow_kd).unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::KdTree, Outcome::AboveBreakEven)
     );
     assert_eq!(r.break_even_rays, f64::INFINITY);
 
@@ -266,7 +282,7 @@ fn a_switch_that_does_not_fit_the_memory_limit_keeps_the_grid() {
 fn caller_sample_rays_feed_the_estimate() {
     let data = kd_friendly();
     let mesh = mesh_of(&data);
-    let c = Calibration::new(0, [10.0, 1.0, 10.0, 30.0, 10.0, 50.0, 5.0, 20.0]).unwrap();
+    let c = Calibration::new(0, [10.0, 1.0, 10.0, 30.0, 10.0, 50.0, 5.0, 20.0, 0.0]).unwrap();
     // (1 ns per ray plus 10 per cell and 30 per test: rays that do nothing cost 1 ns.)
     // Rays that all miss (pointing away from the box) cost the grid no cells or tests.
     let away: Vec<rayq::Ray> = (0..64)

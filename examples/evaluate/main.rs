@@ -23,15 +23,16 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use rayq::mesh::MeshData;
-use rayq::select::decision::{kd_tree_confirmed, kd_tree_work_limit};
+use rayq::select::calibration::BUILTIN_VARIANT;
+use rayq::select::decision::{kd_tree_confirmed, kd_tree_work_limit, CostEstimate, TRIAL_SHARE};
 use rayq::select::fit::Observation;
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
 use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
 use rayq::select::validate::{
-    best_variant, cross_validated_break_even, cross_validated_errors, median, relative_error,
-    GridCost, VARIANTS,
+    best_variant, cross_validated_break_even, cross_validated_errors, cross_validated_estimates,
+    median, relative_error, GridCost, VARIANTS,
 };
 #[cfg(feature = "peers")]
 use rayq::Ray;
@@ -346,13 +347,13 @@ struct Totals {
     oracle: f64,
 }
 
-/// What the selector sees and pays on a scene for one budget: its W* estimate, the time of its
+/// What the selector sees and pays on a scene for one budget: its estimates, the time of its
 /// sample rays on the grid, whether the kd-tree passes the check after it is built, and the time of
 /// the sample rays on the kd-tree (the check's cost); or, when the build stops at its work limit,
 /// the time until then (the grid stays, rebuilt).
 #[derive(Clone, Copy)]
 struct Selector {
-    w_est: f64,
+    estimate: CostEstimate,
     sample_s: f64,
     confirmed: bool,
     check_s: f64,
@@ -375,19 +376,20 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64) -> f64 {
     first * tg + b + s.check_s + (r - first) * rest
 }
 
-fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64) -> Totals {
+/// The strategies' totals, AUTO's with trial builds at `share` of the grid's estimated time (0: none).
+fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64, share: f64) -> Totals {
     let (g, b) = (o.grid_build_ns * 1e-9, o.kd_build_ns * 1e-9);
     let (tg, tk) = (o.grid_ray_ns * 1e-9, o.kd_ray_ns * 1e-9);
     let grid = g + r * tg;
     let kd = b + r * tk;
     let auto_known = g
         + known.sample_s
-        + if r >= known.w_est {
+        + if r >= known.estimate.build_rays_at(share) {
             after_switch(o, known, 0.0, r)
         } else {
             r * tg
         };
-    let switch = unknown.w_est.ceil();
+    let switch = unknown.estimate.build_rays_at(share).ceil();
     let auto_unknown = g
         + unknown.sample_s
         + if r > switch {
@@ -489,7 +491,16 @@ fn with_side(results: &[Measured], k: usize) -> Vec<Observation> {
 
 fn analyse(results: &[Measured], args: &Args) -> String {
     let obs: Vec<Observation> = results.iter().map(|m| m.obs).collect();
-    let (variant, terms, _) = best_variant(&obs);
+    // The variant the built-in calibration was fitted with (the variants table below compares
+    // them all on these measurements).
+    let (variant, terms) = VARIANTS
+        .iter()
+        .copied()
+        .find(|(label, _)| *label == BUILTIN_VARIANT)
+        .unwrap_or_else(|| {
+            let (label, terms, _) = best_variant(&obs);
+            (label, terms)
+        });
     let loo = cross_validated_break_even(&obs, &terms, 0, GridCost::Counted);
     let kfold = cross_validated_break_even(&obs, &terms, 4, GridCost::Counted);
     let clock = cross_validated_errors(&obs, &terms, 0, GridCost::Clock);
@@ -507,8 +518,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     // The selector's estimate and sampling time depend on the budget: with R known, the library
     // caps its sample rays (SampleParams::for_budget); take the measured side at or below the one it
     // would use. With R unknown it uses the default side.
-    let loo_by_side: Vec<Vec<f64>> = (0..SAMPLE_SIDES.len())
-        .map(|k| cross_validated_break_even(&with_side(results, k), &terms, 0, GridCost::Counted))
+    let loo_by_side: Vec<Vec<CostEstimate>> = (0..SAMPLE_SIDES.len())
+        .map(|k| cross_validated_estimates(&with_side(results, k), &terms, 0, GridCost::Counted))
         .collect();
     let side_index = |r: f64| {
         let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
@@ -519,7 +530,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let k = side_index(r);
         let m = &results[i];
         Selector {
-            w_est: loo_by_side[k][i],
+            estimate: loo_by_side[k][i],
             sample_s: m.samples[k].1 * 1e-9,
             confirmed: kd_tree_confirmed(
                 rayq::Calibration::builtin(),
@@ -530,7 +541,16 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             abandoned_s: m.abandoned_s,
         }
     };
-    let at = |i: usize, r: f64| totals(&results[i].obs, &selector(i, r), &selector(i, 0.0), r);
+    let at_share = |i: usize, r: f64, share: f64| {
+        totals(
+            &results[i].obs,
+            &selector(i, r),
+            &selector(i, 0.0),
+            r,
+            share,
+        )
+    };
+    let at = |i: usize, r: f64| at_share(i, r, TRIAL_SHARE);
 
     let mut md = String::new();
     let _ = writeln!(md, "# Evaluation\n");
@@ -559,7 +579,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             decisions += 1;
             let sel = selector(i, r);
             right += usize::from(
-                (r >= sel.w_est && sel.confirmed && sel.abandoned_s.is_none()) == (t.kd < t.grid),
+                (r >= sel.estimate.build_rays() && sel.confirmed && sel.abandoned_s.is_none())
+                    == (t.kd < t.grid),
             );
             if q > worst.0 {
                 worst = (q, format!("{} at R = {r:.0e}", m.name));
@@ -603,7 +624,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     );
     let _ = writeln!(
         md,
-        "| model variant (lowest leave-one-out error) | {variant} | |\n"
+        "| model variant (the built-in calibration's) | {variant} | |\n"
     );
 
     // Per-scene table.
@@ -647,6 +668,45 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             fmt_w(w_est),
             ratio,
             lost.join(" / ")
+        );
+    }
+
+    // The trial share against regret, on the same measurements.
+    let _ = writeln!(
+        md,
+        "\n### Trial builds\n\nAUTO builds the kd-tree at the estimated W*, or as a trial once its \
+         estimated build is at most a share of the grid's estimated trace time (the check after the \
+         build keeps the faster structure). Regret over the scenes × budgets above for each share \
+         (the library uses {:.4}):\n",
+        TRIAL_SHARE
+    );
+    let _ = writeln!(
+        md,
+        "| share | regret geometric mean | worst | unknown budget worst | trials built |\n|---:|---:|---:|---:|---:|"
+    );
+    for share in [
+        0.0,
+        1.0 / 64.0,
+        1.0 / 32.0,
+        1.0 / 16.0,
+        1.0 / 8.0,
+        1.0 / 4.0,
+    ] {
+        let (mut q, mut worst, mut worst_u, mut trials) = (Vec::new(), 1.0f64, 1.0f64, 0usize);
+        for i in 0..results.len() {
+            for r in budgets() {
+                let t = at_share(i, r, share);
+                q.push(t.auto_known / t.oracle);
+                worst = worst.max(t.auto_known / t.oracle);
+                worst_u = worst_u.max(t.auto_unknown / t.oracle);
+                let e = selector(i, r).estimate;
+                trials += usize::from(r < e.break_even_rays() && r >= e.build_rays_at(share));
+            }
+        }
+        let _ = writeln!(
+            md,
+            "| {share:.4} | {:.3} | {worst:.3} | {worst_u:.3} | {trials} |",
+            geomean(&q)
         );
     }
 

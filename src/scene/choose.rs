@@ -29,7 +29,8 @@ pub(super) struct Choice {
 
 /// Builds the structure `options` ask for over `mesh`. `Auto` builds the grid, traces the sample
 /// rays (`samples`, or the library's) through it, estimates the costs with `calibration`, and then:
-/// with a known `expected_rays`, keeps the grid or replaces it by the kd-tree (the grid is released
+/// with a known `expected_rays`, keeps the grid or replaces it by the kd-tree (at W*, or as a trial
+/// where the build is cheap against the grid's time: see `Decision::Trial`; the grid is released
 /// first, so the memory limit must hold the mesh and the kd-tree) and keeps that kd-tree only if
 /// it saves work on the same samples; with an unknown budget, stays on the grid. What it built is
 /// released on failure; `mesh` is the caller's.
@@ -65,10 +66,16 @@ pub(super) fn choose(
         budget_rays => match (estimate.decide(budget_rays), options.budget_kind) {
             (Decision::GridFasterPerRay, _) => Outcome::GridFasterPerRay,
             (Decision::BelowBreakEven, _) => Outcome::BelowBreakEven,
-            (Decision::AboveBreakEven, BudgetKind::Expected) => Outcome::AboveBreakEven,
-            // An upper bound above W* may still end below it: pay for the kd-tree only once the
-            // rays traced say so.
-            (Decision::AboveBreakEven, BudgetKind::AtMost) => Outcome::OnlineOnGrid,
+            // A trial that the check keeps is reported as above the break-even: the kd-tree was
+            // built and measured to save work (the report's W* says which it was).
+            (Decision::AboveBreakEven | Decision::Trial, BudgetKind::Expected) => {
+                Outcome::AboveBreakEven
+            }
+            // An upper bound above W* (or the trial workload) may still end below it: pay for the
+            // kd-tree only once the rays traced say so.
+            (Decision::AboveBreakEven | Decision::Trial, BudgetKind::AtMost) => {
+                Outcome::OnlineOnGrid
+            }
         },
     };
     let max_rays = match (options.expected_rays, options.budget_kind) {

@@ -11,9 +11,7 @@ use crate::geometry::{Conditions, Geometry, HitEx, RayEx, Visibility};
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
-use crate::select::decision::{
-    kd_tree_confirmed, kd_tree_work_limit, CostEstimate, Decision, OnlineSwitch,
-};
+use crate::select::decision::{kd_tree_confirmed, kd_tree_work_limit, CostEstimate, OnlineSwitch};
 use crate::select::model::SceneFeatures;
 use crate::select::sample::{sample_grid, sample_kdtree, RaySource, SampleParams};
 
@@ -511,8 +509,10 @@ impl Scene {
     /// Between batches (never during queries): `rays_traced` since the last call and
     /// `rays_remaining` still expected (0 = unknown, [`RAYS_REMAINING_NONE`] = none). A scene built
     /// with `Auto` and an unknown budget (or an upper bound above W*) that is still on the grid
-    /// switches to the kd-tree when the remaining budget is at least W*, or, with the budget still
-    /// unknown, once the excess paid on the grid reaches the kd-tree's build cost (and, under an
+    /// switches to the kd-tree when the remaining budget is at least W* (or the trial workload,
+    /// where the build costs at most `select::decision::TRIAL_SHARE` of tracing those rays on the
+    /// grid), or, with the budget still unknown, once the excess paid on the grid reaches the
+    /// kd-tree's build cost (or the grid has cost that build 16 times over) (and, under an
     /// upper bound, the rays that may still come are at least W*). After [`RAYS_REMAINING_NONE`]
     /// it never switches.
     ///
@@ -520,7 +520,7 @@ impl Scene {
     /// the ray; up to 1 024). Once it holds 256, this call estimates the costs again from those
     /// rays instead of the library's samples (the report's estimates change, and W* with them),
     /// and a scene built with a known budget on the grid switches too when `rays_remaining` is at
-    /// least the new W*: the renderer's own rays correct a decision made on samples that did not
+    /// least the new W* (or the new trial workload, `select::decision::Decision::Trial`): the renderer's own rays correct a decision made on samples that did not
     /// look like them (a camera inside the scene, short occlusion rays). A kd-tree built then is
     /// kept only if it saves work on those same rays.
     ///
@@ -538,7 +538,9 @@ impl Scene {
             Some(rule) => {
                 let due = rule.record(rays_traced);
                 if rays_remaining > 0 {
-                    self.report_estimate().decide(rays_remaining) == Decision::AboveBreakEven
+                    self.report_estimate()
+                        .decide(rays_remaining)
+                        .builds_kd_tree()
                 } else {
                     due
                 }
@@ -546,7 +548,10 @@ impl Scene {
             None => {
                 tapped.is_some()
                     && rays_remaining > 0
-                    && self.report_estimate().decide(rays_remaining) == Decision::AboveBreakEven
+                    && self
+                        .report_estimate()
+                        .decide(rays_remaining)
+                        .builds_kd_tree()
             }
         };
         if !switch {

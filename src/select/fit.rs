@@ -85,11 +85,17 @@ pub fn fit(
     let mut values = [0.0; CONSTANT_COUNT];
     for part in Part::ALL {
         let coef = fit_part(observations, part, terms.of(part)).ok_or(FitError::NoObservations)?;
-        for (i, c) in part.constants().zip(coef) {
+        for (&i, c) in part.constants().iter().zip(coef) {
             values[i] = c.clamp(CONSTANTS[i].min, CONSTANTS[i].max);
         }
     }
     Calibration::new(machine, values).map_err(|_| FitError::NoObservations)
+}
+
+/// True when `o`'s measurement of `part` can be fitted (finite, positive).
+fn usable(o: &Observation, part: Part) -> bool {
+    let y = o.measured(part);
+    y.is_finite() && y > 0.0
 }
 
 /// Least squares of relative error for one part, dropping terms whose coefficient comes out
@@ -99,17 +105,33 @@ fn fit_part(
     part: Part,
     mut mask: [bool; MAX_TERMS],
 ) -> Option<[f64; MAX_TERMS]> {
-    let usable = |o: &&Observation| {
-        let y = o.measured(part);
-        y.is_finite() && y > 0.0
-    };
+    let usable = |o: &&Observation| usable(o, part);
     if !observations.iter().any(|o| usable(&o)) {
         return None;
     }
-    let active: usize = mask.iter().map(|&m| usize::from(m)).sum();
-    if active == 1 {
-        // One coefficient: the median of measured / term, which a few scenes whose cost has another
-        // cause (a kd-tree that never splits builds almost for free) cannot drag away.
+    loop {
+        let active: usize = mask.iter().map(|&m| usize::from(m)).sum();
+        if active == 1 {
+            return Some(median_ratio(observations, part, &mask));
+        }
+        let Some(c) = least_squares(observations, part, &mut mask) else {
+            continue;
+        };
+        return Some(c);
+    }
+}
+
+/// One coefficient (the one term `mask` leaves, from the start or after the others were
+/// dropped): the median of measured / term, which a few scenes whose cost has another cause (a
+/// kd-tree that never splits builds almost for free) cannot drag away, where least squares of
+/// relative error would pull it towards the cheapest scenes.
+fn median_ratio(
+    observations: &[Observation],
+    part: Part,
+    mask: &[bool; MAX_TERMS],
+) -> [f64; MAX_TERMS] {
+    let usable = |o: &&Observation| usable(o, part);
+    {
         let k = mask.iter().position(|&m| m).unwrap_or(0);
         let mut ratios: Vec<f64> = observations
             .iter()
@@ -118,14 +140,25 @@ fn fit_part(
             .filter(|r| r.is_finite() && *r >= 0.0)
             .collect();
         if ratios.is_empty() {
-            return Some([0.0; MAX_TERMS]);
+            return [0.0; MAX_TERMS];
         }
         ratios.sort_by(f64::total_cmp);
         let mut c = [0.0; MAX_TERMS];
         c[k] = ratios[ratios.len() / 2];
-        return Some(c);
+        c
     }
-    loop {
+}
+
+/// Least squares of relative error over the terms `mask` leaves: the coefficients when none is
+/// negative; otherwise the most negative term (or, for a singular system, the last one still in)
+/// is dropped from `mask` and `None` returned, for the caller to fit again (all dropped: zeros).
+fn least_squares(
+    observations: &[Observation],
+    part: Part,
+    mask: &mut [bool; MAX_TERMS],
+) -> Option<[f64; MAX_TERMS]> {
+    let usable = |o: &&Observation| usable(o, part);
+    {
         // Normal equations of Σ ((terms·c − y) / y)².
         let mut a = [[0.0f64; MAX_TERMS]; MAX_TERMS];
         let mut b = [0.0f64; MAX_TERMS];
@@ -174,6 +207,7 @@ fn fit_part(
         if !mask.iter().any(|&m| m) {
             return Some([0.0; MAX_TERMS]);
         }
+        None
     }
 }
 
@@ -231,12 +265,14 @@ mod tests {
             hits: (h * rays as f64) as u64,
             cells: (cells * rays as f64) as u64,
             tests: (tests * rays as f64) as u64,
+            grid_references: (n as f64 * (1.5 + h)) as u64,
         }
     }
 
     #[test]
     fn recovers_the_constants_of_a_model_it_can_express() {
-        let truth = Calibration::new(0, [20.0, 50.0, 4.0, 30.0, 90.0, 80.0, 12.0, 40.0]).unwrap();
+        let truth =
+            Calibration::new(0, [20.0, 50.0, 4.0, 30.0, 90.0, 80.0, 12.0, 40.0, 7.0]).unwrap();
         let obs: Vec<Observation> = [
             (1_000, 0.9, 10.0, 5.0),
             (20_000, 0.5, 40.0, 20.0),

@@ -183,6 +183,7 @@ pub fn observe_rays(
     let tree = tree?;
     let mut work = SceneFeatures {
         triangles: mesh.len() - mesh.degenerate_count(),
+        grid_references: grid.reference_count() as u64,
         ..SceneFeatures::default()
     };
     for r in rays {

@@ -4,13 +4,12 @@
 //! calibration's constants. The fit ([`crate::select::fit`]) uses the same terms, so the model is
 //! defined once, here.
 
-use core::ops::Range;
-
 use super::calibration::Calibration;
 use super::decision::CostEstimate;
 use crate::math;
 
-/// What the selector knows of a scene: its size and what a set of rays did on the grid.
+/// What the selector knows of a scene: its size, its grid's reference count, and what a set of rays
+/// did on the grid.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct SceneFeatures {
     /// Non-degenerate triangles.
@@ -23,6 +22,9 @@ pub struct SceneFeatures {
     pub cells: u64,
     /// Triangle tests on the grid, summed over the rays.
     pub tests: u64,
+    /// References in the grid's cell lists (0: not known): long or overlapping triangles, which
+    /// the kd-tree must clip at every level, show here as many references per triangle.
+    pub grid_references: u64,
 }
 
 impl SceneFeatures {
@@ -49,6 +51,15 @@ impl SceneFeatures {
         self.per_ray(self.tests)
     }
 
+    /// The grid's references per triangle (0 when not known or without triangles).
+    pub fn grid_references_per_triangle(&self) -> f64 {
+        if self.triangles == 0 {
+            0.0
+        } else {
+            self.grid_references as f64 / self.triangles as f64
+        }
+    }
+
     /// `log2 N` (0 for N ≤ 1).
     pub fn log2_triangles(&self) -> f64 {
         math::log2_64(self.triangles.max(1) as f64)
@@ -73,7 +84,7 @@ pub enum Part {
     GridBuild,
     /// Grid time per ray: `c₀ + c₁·cells + c₂·tests` (per ray, counted on the grid).
     GridRay,
-    /// kd-tree build: `c·N·log2 N`.
+    /// kd-tree build: `N·log2 N·(c₀ + c₁·g)`, `g` the grid's references per triangle.
     KdBuild,
     /// kd-tree time per ray: `h·(c₀ + c₁·log2 N) + (1 − h)·c₂`, `h` the fraction of rays that hit.
     KdRay,
@@ -83,13 +94,14 @@ impl Part {
     /// Every part, in calibration order.
     pub const ALL: [Part; 4] = [Part::GridBuild, Part::GridRay, Part::KdBuild, Part::KdRay];
 
-    /// Which constants of the calibration are this part's coefficients.
-    pub fn constants(self) -> Range<usize> {
+    /// Which constants of the calibration are this part's coefficients, in term order (the
+    /// kd-tree build's second one was appended to the blob later, hence not beside the first).
+    pub fn constants(self) -> &'static [usize] {
         match self {
-            Part::GridBuild => 0..1,
-            Part::GridRay => 1..4,
-            Part::KdBuild => 4..5,
-            Part::KdRay => 5..8,
+            Part::GridBuild => &[0],
+            Part::GridRay => &[1, 2, 3],
+            Part::KdBuild => &[4, 8],
+            Part::KdRay => &[5, 6, 7],
         }
     }
 
@@ -100,7 +112,10 @@ impl Part {
         match self {
             Part::GridBuild => [n, 0.0, 0.0],
             Part::GridRay => [1.0, f.cells_per_ray(), f.tests_per_ray()],
-            Part::KdBuild => [n * f.log2_triangles(), 0.0, 0.0],
+            Part::KdBuild => {
+                let nlogn = n * f.log2_triangles();
+                [nlogn, nlogn * f.grid_references_per_triangle(), 0.0]
+            }
             Part::KdRay => [h, h * f.log2_triangles(), 1.0 - h],
         }
     }
@@ -109,8 +124,9 @@ impl Part {
     pub fn predict(self, calibration: &Calibration, f: &SceneFeatures) -> f64 {
         let terms = self.terms(f);
         self.constants()
+            .iter()
             .zip(terms)
-            .map(|(i, t)| calibration.value(i) * t)
+            .map(|(&i, t)| calibration.value(i) * t)
             .sum()
     }
 }

@@ -81,18 +81,20 @@ impl Default for SampleParams {
 }
 
 /// Traces the sample rays (the caller's, or the library's per `params`) through `grid`, counting
-/// cells, triangle tests and hits.
+/// cells, triangle tests and hits; the features also carry the grid's reference count.
 pub fn sample_grid(
     grid: &UniformGrid,
     mesh: &TriMesh,
     rays: Option<&dyn RaySource>,
     params: &SampleParams,
 ) -> SceneFeatures {
-    sample_with(mesh, rays, params, |ray| {
+    let mut f = sample_with(mesh, rays, params, |ray| {
         let mut work = GridWork::default();
         let hit = grid.intersect_counted(mesh, ray, &mut work);
         (hit, work.cells, work.tests)
-    })
+    });
+    f.grid_references = grid.reference_count() as u64;
+    f
 }
 
 /// The same sample rays as [`sample_grid`] (the kd-tree's hits are the grid's, so the bounces are

@@ -5,6 +5,7 @@
 use alloc::vec::Vec;
 
 use super::calibration::Calibration;
+use super::decision::CostEstimate;
 use super::fit::{fit, Observation, Terms};
 
 /// `|estimate / measured − 1|`, with `∞/∞` counting as exact and one infinite (or non-positive
@@ -35,24 +36,38 @@ pub enum GridCost {
     Clock,
 }
 
-/// W* for `o` as the selector would estimate it at run time with `calibration`.
-pub fn predicted_break_even(calibration: &Calibration, o: &Observation, grid: GridCost) -> f64 {
+/// The estimates for `o` as the selector would make them at run time with `calibration`.
+pub fn predicted_estimate(
+    calibration: &Calibration,
+    o: &Observation,
+    grid: GridCost,
+) -> CostEstimate {
     let mut e = calibration.estimate(&o.sample);
     if grid == GridCost::Clock {
         e.grid_ray_seconds = o.sample_grid_ray_ns * 1e-9;
     }
-    e.break_even_rays()
+    e
 }
 
-/// Each observation's predicted W*, from a calibration fitted on the others: `folds = 0` leaves one
+/// W* for `o` as the selector would estimate it at run time with `calibration`.
+pub fn predicted_break_even(calibration: &Calibration, o: &Observation, grid: GridCost) -> f64 {
+    predicted_estimate(calibration, o, grid).break_even_rays()
+}
+
+/// Each observation's estimates, from a calibration fitted on the others: `folds = 0` leaves one
 /// out at a time, otherwise observation `i` is in fold `i % folds`. NaN where no fit was possible.
-pub fn cross_validated_break_even(
+pub fn cross_validated_estimates(
     obs: &[Observation],
     terms: &Terms,
     folds: usize,
     grid: GridCost,
-) -> Vec<f64> {
+) -> Vec<CostEstimate> {
     let fold_of = |i: usize| if folds == 0 { i } else { i % folds };
+    let none = CostEstimate {
+        grid_ray_seconds: f64::NAN,
+        kd_ray_seconds: f64::NAN,
+        kd_build_seconds: f64::NAN,
+    };
     (0..obs.len())
         .map(|i| {
             let rest: Vec<Observation> = obs
@@ -61,8 +76,21 @@ pub fn cross_validated_break_even(
                 .filter(|&(j, _)| fold_of(j) != fold_of(i))
                 .map(|(_, o)| *o)
                 .collect();
-            fit(&rest, terms, 0).map_or(f64::NAN, |c| predicted_break_even(&c, &obs[i], grid))
+            fit(&rest, terms, 0).map_or(none, |c| predicted_estimate(&c, &obs[i], grid))
         })
+        .collect()
+}
+
+/// Each observation's predicted W* (see [`cross_validated_estimates`]).
+pub fn cross_validated_break_even(
+    obs: &[Observation],
+    terms: &Terms,
+    folds: usize,
+    grid: GridCost,
+) -> Vec<f64> {
+    cross_validated_estimates(obs, terms, folds, grid)
+        .iter()
+        .map(CostEstimate::break_even_rays)
         .collect()
 }
 
@@ -86,7 +114,7 @@ const fn terms(grid: [bool; 3], kd_ray: [bool; 3]) -> Terms {
 
 /// The model variants compared, fewest terms first: a term stays only if it lowers the
 /// cross-validated error.
-pub const VARIANTS: [(&str, Terms); 5] = [
+pub const VARIANTS: [(&str, Terms); 6] = [
     (
         "kd ray constant",
         terms([true, true, true], [true, false, false]),
@@ -102,6 +130,10 @@ pub const VARIANTS: [(&str, Terms); 5] = [
     (
         "kd ray h, 1-h",
         terms([true, true, true], [true, false, true]),
+    ),
+    (
+        "all but the kd build's grid references",
+        terms([true, true, true], [true, true, true]),
     ),
     ("all terms", Terms::ALL),
 ];
