@@ -14,6 +14,7 @@
 //! (online switch), and the peers; the regret against the oracle (the better fixed choice knowing R).
 
 mod accuracy;
+mod interior;
 #[cfg(feature = "peers")]
 #[path = "../../benches/shared/peer_structures.rs"]
 mod peer_structures;
@@ -464,7 +465,12 @@ fn main() {
         std::process::exit(1);
     }
     std::fs::create_dir_all(&args.out).ok();
-    let report = analyse(&results, &args);
+    let mut report = analyse(&results, &args);
+    println!("timing the interior camera case");
+    match interior::section(if args.quick { 1 } else { 5 }) {
+        Some(md) => report.push_str(&md),
+        None => eprintln!("../shared/scenes/sibenik.obj not found: no interior camera section"),
+    }
     let path = args.out.join("evaluation.md");
     std::fs::write(&path, report).expect("write docs/evaluation.md");
     println!("wrote {}", path.display());

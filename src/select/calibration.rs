@@ -48,38 +48,33 @@ pub const CONSTANTS: [Constant; 9] = [
         meaning: "kd-tree build time per N·log2 N",
     },
     Constant {
-        name: "kd_ns_per_hit_ray",
-        min: 0.0,
-        max: 1e6,
-        meaning: "kd-tree time per ray that hits, constant part",
-    },
-    Constant {
-        name: "kd_ns_per_hit_ray_per_log2n",
-        min: 0.0,
-        max: 1e6,
-        meaning: "kd-tree time per ray that hits, per log2 N",
-    },
-    Constant {
-        name: "kd_ns_per_miss_ray",
-        min: 0.0,
-        max: 1e6,
-        meaning: "kd-tree time per ray that misses everything",
-    },
-    Constant {
         name: "kd_build_ns_per_nlogn_per_grid_ref",
         min: 0.0,
         max: 1e6,
-        meaning: "kd-tree build time per N·log2 N per grid reference per triangle (format 2.1)",
+        meaning: "kd-tree build time per N·log2 N per grid reference per triangle",
+    },
+    Constant {
+        name: "kd_ns_per_ray",
+        min: 0.0,
+        max: 1e6,
+        meaning: "fixed kd-tree cost per ray",
+    },
+    Constant {
+        name: "kd_ns_per_grid_cell",
+        min: 0.0,
+        max: 1e6,
+        meaning: "kd-tree time per cell the same ray visits on the grid",
+    },
+    Constant {
+        name: "kd_ns_per_grid_test",
+        min: 0.0,
+        max: 1e6,
+        meaning: "kd-tree time per triangle test the same ray makes on the grid",
     },
 ];
 
 /// Number of constants in this layout.
 pub const CONSTANT_COUNT: usize = CONSTANTS.len();
-
-/// Number of constants of the first layout of this major version (minor 0): a blob holds at least
-/// these; constants appended since are 0 when a blob does not hold them, which turns their terms
-/// off (the model of the older layout).
-pub const FIRST_CONSTANT_COUNT: usize = 8;
 
 /// Machine constants for the cost model.
 ///
@@ -94,10 +89,11 @@ pub struct Calibration {
 
 /// Blob magic: the first eight bytes of every calibration blob.
 pub const MAGIC: [u8; 8] = *b"RQCALIB\0";
-/// Major format version this reader understands.
-pub const FORMAT_MAJOR: u16 = 2;
-/// Minor format version this writer produces (1: the ninth constant appended).
-pub const FORMAT_MINOR: u16 = 1;
+/// Major format version this reader understands (3: the kd-tree's per-ray cost priced on the
+/// grid's counts, and its build on the grid's references, in place of format 2's hit fraction).
+pub const FORMAT_MAJOR: u16 = 3;
+/// Minor format version this writer produces.
+pub const FORMAT_MINOR: u16 = 0;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 32;
 /// Bytes of the trailing CRC-32.
@@ -122,17 +118,19 @@ pub const BUILTIN_VARIANT: &str = "all terms";
 
 /// The calibration compiled into the library: fitted by `cargo run --release --example calibrate
 /// -- --variant "all terms"` (its defaults: the bundled scenes plus the procedural set, 23 scenes)
-/// on the project's 2-core x86-64 VM (an AMD EPYC since stop 19), at stop 20 (the model with the
-/// grid's references per triangle in the kd-tree's build term); `calib/default.rqcal` holds the
-/// same values as a blob (a test keeps the two identical). The fit kept one build term, 26.3 ns
-/// per N·log2 N per grid reference per triangle, and dropped the plain N·log2 N one (its
-/// coefficient came out negative): the kd-tree build's leave-one-out error fell from a median 25.8 %
-/// (max 227 %) to 25.5 % (max 192 %), and on the long-triangle scenes from 34–92 % to 13–30 %.
-/// The variant is named rather than the one with the lowest median W* error ("all but the kd
-/// build's grid references", 70.8 % against 74.9 %), because that median moves by ±10 % between
-/// runs on the same machine (docs/evaluation.md, "Model terms") while the build term's gain on
-/// slivers, hair and gears is 3–7× in their W*. Prices for both cells and tests are kept, which the
-/// check after a kd-tree build (`decision::kd_tree_confirmed`) needs.
+/// on the project's 2-core x86-64 VM (an AMD EPYC since stop 19), at stop 20 (format 3: the
+/// kd-tree's build priced on the grid's references per triangle, its per-ray cost on the grid's
+/// counts); `calib/default.rqcal` holds the same values as a blob (a test keeps the two
+/// identical). The build kept one term, 26.3 ns per N·log2 N per grid reference per triangle (the
+/// plain N·log2 N one came out negative): its leave-one-out error fell from a median 25.8 % (max
+/// 227 %) to 25.5 % (max 192 %), and on the long-triangle scenes from 34–92 % to 13–30 %. The
+/// kd-tree per ray became 121 ns plus 2.98 per grid test (the cell term dropped): its in-sample
+/// error fell from a median 32.3 % with format 2's hit-fraction model to 22.2 %, and it follows
+/// the rays (a camera inside a building makes both structures' estimates grow), where the
+/// hit-fraction model priced every hitting ray alike. The variant is named rather than the one
+/// with the lowest median W* error, because that median moves by ±10 % between runs on the same
+/// machine (docs/evaluation.md, "Model terms"). Prices for both cells and tests are kept, which
+/// the check after a kd-tree build (`decision::kd_tree_confirmed`) needs.
 pub const BUILTIN: Calibration = Calibration {
     machine: 0,
     build: 0,
@@ -142,10 +140,10 @@ pub const BUILTIN: Calibration = Calibration {
         11.755063922161117,
         3.666734274073472,
         0.0,
-        0.0,
-        43.5100576713179,
-        48.767533969222946,
         26.29825833962788,
+        121.09213960687009,
+        0.0,
+        2.977753996237403,
     ],
 };
 
@@ -243,16 +241,15 @@ impl Calibration {
         let count = payload
             .get(0..4)
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
-        // The payload holds its count of constants (at least the first layout's), then perhaps
-        // fields of a newer minor layout; the constants this reader knows are read, later ones and
-        // trailing fields ignored, appended ones the blob lacks left at 0.
-        let first = 4 + 8 * FIRST_CONSTANT_COUNT;
-        let held = match count {
-            Some(c) if c >= FIRST_CONSTANT_COUNT && (payload.len() - 4) / 8 >= c => c,
-            _ => return Err(truncated(HEADER_LEN + first + CRC_LEN)),
-        };
+        // The payload holds its count of constants (at least this layout's), then perhaps fields
+        // of a newer minor layout: the constants this reader knows are read, the rest ignored.
+        let known = 4 + 8 * CONSTANT_COUNT;
+        match count {
+            Some(c) if c >= CONSTANT_COUNT && (payload.len() - 4) / 8 >= c => {}
+            _ => return Err(truncated(HEADER_LEN + known + CRC_LEN)),
+        }
         let mut values = [0.0; CONSTANT_COUNT];
-        for (i, v) in values.iter_mut().enumerate().take(held) {
+        for (i, v) in values.iter_mut().enumerate() {
             let at = 4 + 8 * i;
             let mut b = [0u8; 8];
             b.copy_from_slice(&payload[at..at + 8]);
@@ -404,37 +401,5 @@ mod tests {
             Calibration::from_bytes(&buf).map(|c| c.values),
             Ok(BUILTIN.values)
         );
-    }
-
-    #[test]
-    fn a_first_layout_blob_reads_with_the_appended_constants_at_zero() {
-        let mut c = BUILTIN;
-        c.values = core::array::from_fn(|i| 1.0 + i as f64);
-        let mut full = [0u8; BLOB_LEN];
-        c.to_bytes(&mut full).unwrap();
-        // The same blob as minor 0 wrote it: eight constants.
-        let len = HEADER_LEN + 4 + 8 * FIRST_CONSTANT_COUNT + CRC_LEN;
-        let mut old = full[..len].to_vec();
-        old[10..12].copy_from_slice(&0u16.to_le_bytes());
-        old[12..16].copy_from_slice(&((len - HEADER_LEN - CRC_LEN) as u32).to_le_bytes());
-        old[32..36].copy_from_slice(&(FIRST_CONSTANT_COUNT as u32).to_le_bytes());
-        let crc = crc32(&old[..len - CRC_LEN]);
-        old[len - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
-        let read = Calibration::from_bytes(&old).unwrap();
-        assert_eq!(
-            read.values[..FIRST_CONSTANT_COUNT],
-            c.values[..FIRST_CONSTANT_COUNT]
-        );
-        assert!(read.values[FIRST_CONSTANT_COUNT..]
-            .iter()
-            .all(|&v| v == 0.0));
-        // Fewer constants than the first layout: refused.
-        old[32..36].copy_from_slice(&(FIRST_CONSTANT_COUNT as u32 - 1).to_le_bytes());
-        let crc = crc32(&old[..len - CRC_LEN]);
-        old[len - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
-        assert!(matches!(
-            Calibration::from_bytes(&old),
-            Err(CalibError::Truncated { .. })
-        ));
     }
 }

@@ -4,6 +4,8 @@
 //! calibration's constants. The fit ([`crate::select::fit`]) uses the same terms, so the model is
 //! defined once, here.
 
+use core::ops::Range;
+
 use super::calibration::Calibration;
 use super::decision::CostEstimate;
 use crate::math;
@@ -86,7 +88,9 @@ pub enum Part {
     GridRay,
     /// kd-tree build: `N·log2 N·(c₀ + c₁·g)`, `g` the grid's references per triangle.
     KdBuild,
-    /// kd-tree time per ray: `h·(c₀ + c₁·log2 N) + (1 − h)·c₂`, `h` the fraction of rays that hit.
+    /// kd-tree time per ray: `c₀ + c₁·cells + c₂·tests`, priced on what the same rays did on the
+    /// grid: both structures' work grows with the geometry a ray passes near, so the estimate
+    /// follows the workload (a camera inside the scene, long or short rays) as the grid's does.
     KdRay,
 }
 
@@ -94,29 +98,26 @@ impl Part {
     /// Every part, in calibration order.
     pub const ALL: [Part; 4] = [Part::GridBuild, Part::GridRay, Part::KdBuild, Part::KdRay];
 
-    /// Which constants of the calibration are this part's coefficients, in term order (the
-    /// kd-tree build's second one was appended to the blob later, hence not beside the first).
-    pub fn constants(self) -> &'static [usize] {
+    /// Which constants of the calibration are this part's coefficients, in term order.
+    pub fn constants(self) -> Range<usize> {
         match self {
-            Part::GridBuild => &[0],
-            Part::GridRay => &[1, 2, 3],
-            Part::KdBuild => &[4, 8],
-            Part::KdRay => &[5, 6, 7],
+            Part::GridBuild => 0..1,
+            Part::GridRay => 1..4,
+            Part::KdBuild => 4..6,
+            Part::KdRay => 6..9,
         }
     }
 
     /// The part's terms for a scene (unused slots are 0).
     pub fn terms(self, f: &SceneFeatures) -> [f64; MAX_TERMS] {
         let n = f.triangles as f64;
-        let h = f.hit_fraction();
         match self {
             Part::GridBuild => [n, 0.0, 0.0],
-            Part::GridRay => [1.0, f.cells_per_ray(), f.tests_per_ray()],
             Part::KdBuild => {
                 let nlogn = n * f.log2_triangles();
                 [nlogn, nlogn * f.grid_references_per_triangle(), 0.0]
             }
-            Part::KdRay => [h, h * f.log2_triangles(), 1.0 - h],
+            Part::GridRay | Part::KdRay => [1.0, f.cells_per_ray(), f.tests_per_ray()],
         }
     }
 
@@ -124,9 +125,8 @@ impl Part {
     pub fn predict(self, calibration: &Calibration, f: &SceneFeatures) -> f64 {
         let terms = self.terms(f);
         self.constants()
-            .iter()
             .zip(terms)
-            .map(|(&i, t)| calibration.value(i) * t)
+            .map(|(i, t)| calibration.value(i) * t)
             .sum()
     }
 }
