@@ -153,7 +153,10 @@ impl MemoryBudget {
     }
 
     /// Appends `value` to a vector that grows as the build goes (doubling, at least 64 elements),
-    /// charging each growth to the budget before asking the allocator.
+    /// charging each growth to the budget before asking the allocator. Inline, with the growth out
+    /// of line: builders push one item at a time into vectors they usually reserved ahead, and the
+    /// call per item cost the kd-tree build 5–7 % of its instructions.
+    #[inline(always)]
     pub fn push<T>(
         &mut self,
         v: &mut Vec<T>,
@@ -161,26 +164,35 @@ impl MemoryBudget {
         what: &'static str,
     ) -> Result<(), BuildError> {
         if v.len() == v.capacity() {
-            let more = v.capacity().max(64);
-            let bytes =
-                more.checked_mul(core::mem::size_of::<T>())
-                    .ok_or(BuildError::OutOfMemory {
-                        what,
-                        bytes: usize::MAX,
-                    })?;
-            self.charge(bytes, what)?;
-            let before = v.capacity();
-            if v.try_reserve_exact(more).is_err() {
-                self.release(bytes);
-                return Err(BuildError::OutOfMemory { what, bytes });
-            }
-            hint_huge_pages(v);
-            // The allocator may round up; count what is really held so `free` balances.
-            let extra = (v.capacity() - before).saturating_sub(more) * core::mem::size_of::<T>();
-            self.used += extra;
-            self.peak = self.peak.max(self.used);
+            self.grow_for_push(v, what)?;
         }
+        // Never reallocates: the capacity is above the length here.
         v.push(value);
+        Ok(())
+    }
+
+    /// Doubles `v`'s capacity (at least 64 elements) for [`MemoryBudget::push`], charged first.
+    #[cold]
+    #[inline(never)]
+    fn grow_for_push<T>(&mut self, v: &mut Vec<T>, what: &'static str) -> Result<(), BuildError> {
+        let more = v.capacity().max(64);
+        let bytes = more
+            .checked_mul(core::mem::size_of::<T>())
+            .ok_or(BuildError::OutOfMemory {
+                what,
+                bytes: usize::MAX,
+            })?;
+        self.charge(bytes, what)?;
+        let before = v.capacity();
+        if v.try_reserve_exact(more).is_err() {
+            self.release(bytes);
+            return Err(BuildError::OutOfMemory { what, bytes });
+        }
+        hint_huge_pages(v);
+        // The allocator may round up; count what is really held so `free` balances.
+        let extra = (v.capacity() - before).saturating_sub(more) * core::mem::size_of::<T>();
+        self.used += extra;
+        self.peak = self.peak.max(self.used);
         Ok(())
     }
 
