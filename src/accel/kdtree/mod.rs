@@ -51,9 +51,12 @@ pub struct KdTreeParams {
 
 impl KdTreeParams {
     /// The default: a block test priced at half a node step (`C_t = 1`, `C_i = 0.5` per block of
-    /// four) and empty-space bonus 0.5; the exact sweep for nodes of at most 16 triangles and
-    /// binning above (2–4 % more instructions per ray than sweeping exactly up to 1 024, for
-    /// 1.0–2.1× less build); a reference share of 64 per triangle, which the SAH's own termination
+    /// four) and empty-space bonus 0.5; min-max binning at every node (stop 20: against the exact
+    /// split for nodes of at most 16 triangles, 10–32 % fewer build instructions on bunny, sibenik,
+    /// gears, hair, slivers, soup and stadium, and the same instructions per ray within 0.02 %
+    /// but sibenik's +1.0 %; callgrind; binning everywhere is 2–4 % more instructions per ray
+    /// than sweeping exactly up to 1 024, `HIGH`, for 1.0–2.1× less build); a reference share of 64
+    /// per triangle, which the SAH's own termination
     /// leaves unused on well-shaped scenes. The costs were chosen by time, not by instructions: a
     /// node step costs more than its ~33 instructions (the nodes of a deep tree miss the cache),
     /// and over the evaluation's scenes (29, one thread, timed per ray and per build against
@@ -67,13 +70,14 @@ impl KdTreeParams {
         max_depth: 0,
         max_leaf_prims: 1,
         max_references_per_triangle: 64.0,
-        exact_below: 16,
+        exact_below: 0,
         layout: TriangleLayout::Packed,
     };
 
     /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
-    /// with bigger leaves (measured against the default: 0.75× its build time, 4.7 % slower per
-    /// ray in the geometric mean, up to 1.3× on gears-10k).
+    /// with bigger leaves (measured against the default at stop 19, both with the exact split up
+    /// to 16 triangles: 0.75× its build time, 4.7 % slower per ray in the geometric mean, up to
+    /// 1.3× on gears-10k).
     pub const FAST: KdTreeParams = KdTreeParams {
         intersection_cost: 0.25,
         ..KdTreeParams::DEFAULT
