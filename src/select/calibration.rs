@@ -121,13 +121,13 @@ pub const BUILTIN_VARIANT: &str = "all terms";
 /// on the project's 2-core x86-64 VM (an AMD EPYC since stop 19), at stop 20 (format 3: the
 /// kd-tree's build priced on the grid's references per triangle, its per-ray cost on the grid's
 /// counts); `calib/default.rqcal` holds the same values as a blob (a test keeps the two
-/// identical), with the kd-tree binned at every node (`KdTreeParams::DEFAULT` since stop 20). The
-/// build kept one term, 22.7 ns per N·log2 N per grid reference per triangle (the plain N·log2 N
+/// identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT` since
+/// stop 20). The build kept one term, 20.2 ns per N·log2 N per grid reference per triangle (the plain N·log2 N
 /// one came out negative; on the same measurements with the earlier trees, 26.3 ns lowered the
 /// build's leave-one-out error from a median 25.8 % (max 227 %) to 25.5 % (max 192 %), and on the
-/// long-triangle scenes from 34–92 % to 13–30 %). The kd-tree per ray became 121.5 ns plus 3.41
+/// long-triangle scenes from 34–92 % to 13–30 %). The kd-tree per ray became 127.5 ns plus 3.17
 /// per grid test (the cell term dropped): its in-sample error fell from a median 32.3 % with
-/// format 2's hit-fraction model to 22.2 % on the same measurements (18.6 % on these), and it follows
+/// format 2's hit-fraction model to 22.2 % on the same measurements (20.3 % on these), and it follows
 /// the rays (a camera inside a building makes both structures' estimates grow), where the
 /// hit-fraction model priced every hitting ray alike. The variant is named rather than the one
 /// with the lowest median W* error, because that median moves by ±10 % between runs on the same
@@ -137,15 +137,15 @@ pub const BUILTIN: Calibration = Calibration {
     machine: 0,
     build: 0,
     values: [
-        69.74750000003915,
-        102.19256024722792,
-        14.053173039767893,
-        3.2680761002614216,
+        77.03823574849488,
+        88.7581617338881,
+        15.011431390652788,
+        3.2193386401336097,
         0.0,
-        22.72594956231349,
-        121.47711161888765,
+        20.19438645690142,
+        127.50981238996677,
         0.0,
-        3.4122146288163844,
+        3.1727715598417467,
     ],
 };
 
