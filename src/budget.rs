@@ -124,20 +124,42 @@ impl MemoryBudget {
 
     /// An empty vector with room for exactly `len` elements, charged to the budget.
     pub fn vec<T>(&mut self, len: usize, what: &'static str) -> Result<Vec<T>, BuildError> {
-        let bytes = len
-            .checked_mul(core::mem::size_of::<T>())
+        let mut v = Vec::new();
+        self.reserve_to(&mut v, len, what)?;
+        Ok(v)
+    }
+
+    /// Makes `v`'s capacity at least `cap` elements (exactly `cap` if it grows, as
+    /// `Vec::try_reserve_exact`), keeping its contents: the growth is charged before the allocator
+    /// is asked (fallibly; a refusal releases the charge), whatever the allocator rounds up is
+    /// counted after, so that [`MemoryBudget::free`] balances, and new whole huge pages get the hint.
+    pub fn reserve_to<T>(
+        &mut self,
+        v: &mut Vec<T>,
+        cap: usize,
+        what: &'static str,
+    ) -> Result<(), BuildError> {
+        let before = v.capacity();
+        if cap <= before {
+            return Ok(());
+        }
+        let size = core::mem::size_of::<T>();
+        let bytes = (cap - before)
+            .checked_mul(size)
             .ok_or(BuildError::OutOfMemory {
                 what,
                 bytes: usize::MAX,
             })?;
         self.charge(bytes, what)?;
-        let mut v = Vec::new();
-        if v.try_reserve_exact(len).is_err() {
+        if v.try_reserve_exact(cap - v.len()).is_err() {
             self.release(bytes);
             return Err(BuildError::OutOfMemory { what, bytes });
         }
-        hint_huge_pages(&mut v);
-        Ok(v)
+        hint_huge_pages(v);
+        let extra = (v.capacity() - before).saturating_sub(cap - before) * size;
+        self.used += extra;
+        self.peak = self.peak.max(self.used);
+        Ok(())
     }
 
     /// A vector of `len` copies of `value`, charged to the budget.
@@ -175,25 +197,14 @@ impl MemoryBudget {
     #[cold]
     #[inline(never)]
     fn grow_for_push<T>(&mut self, v: &mut Vec<T>, what: &'static str) -> Result<(), BuildError> {
-        let more = v.capacity().max(64);
-        let bytes = more
-            .checked_mul(core::mem::size_of::<T>())
-            .ok_or(BuildError::OutOfMemory {
-                what,
-                bytes: usize::MAX,
-            })?;
-        self.charge(bytes, what)?;
-        let before = v.capacity();
-        if v.try_reserve_exact(more).is_err() {
-            self.release(bytes);
-            return Err(BuildError::OutOfMemory { what, bytes });
-        }
-        hint_huge_pages(v);
-        // The allocator may round up; count what is really held so `free` balances.
-        let extra = (v.capacity() - before).saturating_sub(more) * core::mem::size_of::<T>();
-        self.used += extra;
-        self.peak = self.peak.max(self.used);
-        Ok(())
+        let cap =
+            v.capacity()
+                .checked_add(v.capacity().max(64))
+                .ok_or(BuildError::OutOfMemory {
+                    what,
+                    bytes: usize::MAX,
+                })?;
+        self.reserve_to(v, cap, what)
     }
 
     /// Releases a temporary vector charged with [`MemoryBudget::vec`] and drops it.

@@ -434,11 +434,7 @@ fn tight_bounds_sse2(items: &[Item]) -> ([f32; 3], [f32; 3]) {
     }
 }
 
-/// Counts each item's lower and upper bound in its bin per axis: bin `⌊(x − tlo)·scale⌋`, at most
-/// `top`. Every item's bounds lie in the tight bounds `[tlo, thi]`, so `x − tlo` is in
-/// `[0, thi − tlo]` (rounding is monotonic) and `(x − tlo)·scale` in `[0, bins·(1 + ε)]` (`scale` is
-/// finite and not negative), or NaN (`∞ · 0` where `thi − tlo` overflows), which the comparison with
-/// `top` turns into `top`; a bin is therefore in `[0, bins − 1]`, below [`BINS`].
+/// Counts each item's lower and upper bound in its bin per axis (see [`bins_portable`]).
 fn count_bins(
     items: &[Item],
     tlo: [f32; 3],
@@ -448,75 +444,62 @@ fn count_bins(
     ends: &mut [[u32; BINS]; 3],
 ) {
     #[cfg(target_arch = "x86_64")]
-    count_bins_sse2(items, tlo, scale, top, starts, ends);
+    let bins = |x: &[f32; 3]| bins_sse2(x, tlo, scale, top);
     #[cfg(not(target_arch = "x86_64"))]
-    count_bins_portable(items, tlo, scale, top, starts, ends);
-}
-
-/// [`count_bins`] in plain f32: the reference (tested against the SSE2 version) and the version
-/// for other targets.
-#[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
-fn count_bins_portable(
-    items: &[Item],
-    tlo: [f32; 3],
-    scale: [f32; 3],
-    top: f32,
-    starts: &mut [[u32; BINS]; 3],
-    ends: &mut [[u32; BINS]; 3],
-) {
-    let bin = |x: f32, a: usize| {
-        let b = (x - tlo[a]) * scale[a];
-        let b = if b < top { b } else { top };
-        // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
-        unsafe { b.to_int_unchecked::<u32>() as usize }
-    };
+    let bins = |x: &[f32; 3]| bins_portable(x, tlo, scale, top);
     for it in items {
+        let (l, h) = (bins(&it.lo), bins(&it.hi));
         for a in 0..3 {
-            starts[a][bin(it.lo[a], a) & (BINS - 1)] += 1;
-            ends[a][bin(it.hi[a], a) & (BINS - 1)] += 1;
+            // In [0, bins − 1] (see `bins_portable`), so the mask changes nothing; it spares the
+            // bounds check.
+            starts[a][l[a] & (BINS - 1)] += 1;
+            ends[a][h[a] & (BINS - 1)] += 1;
         }
     }
 }
 
-/// [`count_bins`] on SSE2 (part of x86-64's baseline), the three axes of a bound in one register:
-/// the same operations lane by lane (`minps(b, top)` is `b < top ? b : top`, NaN to `top`;
+/// The bin of `x` per axis: `⌊(x − tlo)·scale⌋`, at most `top`. Every item's bounds lie in the
+/// tight bounds `[tlo, thi]`, so `x − tlo` is in `[0, thi − tlo]` (rounding is monotonic) and
+/// `(x − tlo)·scale` in `[0, bins·(1 + ε)]` (`scale` is finite and not negative), or NaN
+/// (`∞ · 0` where `thi − tlo` overflows), which the comparison with `top` turns into `top`; a bin
+/// is therefore in `[0, bins − 1]`, below [`BINS`]. The reference (tested against the SSE2
+/// version) and the version for other targets.
+#[cfg_attr(all(target_arch = "x86_64", not(test)), allow(dead_code))]
+#[inline(always)]
+fn bins_portable(x: &[f32; 3], tlo: [f32; 3], scale: [f32; 3], top: f32) -> [usize; 3] {
+    core::array::from_fn(|a| {
+        let b = (x[a] - tlo[a]) * scale[a];
+        let b = if b < top { b } else { top };
+        // SAFETY: `b` is in [0, bins − 1] (above), where the conversion is exact.
+        unsafe { b.to_int_unchecked::<u32>() as usize }
+    })
+}
+
+/// [`bins_portable`] on SSE2 (part of x86-64's baseline), the three axes in one register: the
+/// same operations lane by lane (`minps(b, top)` is `b < top ? b : top`, NaN to `top`;
 /// `cvttps2dq` truncates as `to_int_unchecked` does in range), so the same bins.
 #[cfg(target_arch = "x86_64")]
-fn count_bins_sse2(
-    items: &[Item],
-    tlo: [f32; 3],
-    scale: [f32; 3],
-    top: f32,
-    starts: &mut [[u32; BINS]; 3],
-    ends: &mut [[u32; BINS]; 3],
-) {
+#[inline(always)]
+fn bins_sse2(x: &[f32; 3], tlo: [f32; 3], scale: [f32; 3], top: f32) -> [usize; 3] {
     use core::arch::x86_64::{
         _mm_cvttps_epi32, _mm_min_ps, _mm_mul_ps, _mm_set1_ps, _mm_set_ps, _mm_storeu_si128,
         _mm_sub_ps,
     };
     // SAFETY: SSE2 is always present on x86-64, and every intrinsic here is SSE2 or SSE; the one
     // store writes 16 bytes into a local `[i32; 4]`.
-    unsafe {
-        let lo4 = _mm_set_ps(0.0, tlo[2], tlo[1], tlo[0]);
-        let scale4 = _mm_set_ps(0.0, scale[2], scale[1], scale[0]);
-        let top4 = _mm_set1_ps(top);
-        let bins = |x: &[f32; 3]| {
-            let v = _mm_set_ps(0.0, x[2], x[1], x[0]);
-            let b = _mm_cvttps_epi32(_mm_min_ps(_mm_mul_ps(_mm_sub_ps(v, lo4), scale4), top4));
-            let mut out = [0i32; 4];
-            _mm_storeu_si128(out.as_mut_ptr().cast(), b);
-            out
-        };
-        for it in items {
-            let (l, h) = (bins(&it.lo), bins(&it.hi));
-            for a in 0..3 {
-                // In [0, bins − 1] (see the portable version), so the mask changes nothing; it
-                // spares the bounds check.
-                starts[a][l[a] as usize & (BINS - 1)] += 1;
-                ends[a][h[a] as usize & (BINS - 1)] += 1;
-            }
-        }
-    }
+    let out = unsafe {
+        let v = _mm_set_ps(0.0, x[2], x[1], x[0]);
+        let lo = _mm_set_ps(0.0, tlo[2], tlo[1], tlo[0]);
+        let sc = _mm_set_ps(0.0, scale[2], scale[1], scale[0]);
+        let b = _mm_cvttps_epi32(_mm_min_ps(
+            _mm_mul_ps(_mm_sub_ps(v, lo), sc),
+            _mm_set1_ps(top),
+        ));
+        let mut out = [0i32; 4];
+        _mm_storeu_si128(out.as_mut_ptr().cast(), b);
+        out
+    };
+    [out[0] as usize, out[1] as usize, out[2] as usize]
 }
 
 /// Maps a finite f32 to bits whose unsigned order is the number's order (`-0.0` counts as `0.0`).
@@ -548,8 +531,8 @@ pub(super) fn auto_depth(live: usize) -> u32 {
     (8 + 13 * log2 / 10).min(MAX_DEPTH)
 }
 
-/// Makes `v` hold at least `cap` elements, keeping its contents, charging the growth to `budget`
-/// before asking the allocator (fallibly); grows by at least an eighth so a creeping stack is copied
+/// Makes `v` hold at least `cap` elements, keeping its contents, charged to `budget`
+/// ([`MemoryBudget::reserve_to`]); grows by at least an eighth so a creeping stack is copied
 /// O(log) times.
 fn grow<T: Copy>(
     budget: &mut MemoryBudget,
@@ -561,25 +544,7 @@ fn grow<T: Copy>(
         return Ok(());
     }
     let cap = cap.max(v.capacity().saturating_add(v.capacity() / 8));
-    let size = core::mem::size_of::<T>();
-    let bytes = (cap - v.capacity())
-        .checked_mul(size)
-        .ok_or(BuildError::OutOfMemory {
-            what,
-            bytes: usize::MAX,
-        })?;
-    budget.charge(bytes, what)?;
-    let before = v.capacity();
-    if v.try_reserve_exact(cap - v.len()).is_err() {
-        budget.release(bytes);
-        return Err(BuildError::OutOfMemory { what, bytes });
-    }
-    // The allocator may round up; count what is really held so `free` balances.
-    let extra = (v.capacity() - before).saturating_sub(cap - before) * size;
-    if extra > 0 {
-        budget.charge(extra, what)?;
-    }
-    Ok(())
+    budget.reserve_to(v, cap, what)
 }
 
 struct Builder<'a> {
@@ -1188,7 +1153,7 @@ mod tests {
     use super::*;
     use crate::workload::SplitMix64;
 
-    /// The vector binning is the plain one: same tight bounds and the same bin counts, on random
+    /// The vector binning is the plain one: same tight bounds and the same bin of every bound, on random
     /// boxes over many magnitudes, with equal, huge and degenerate (flat) extents, and bins of 8 to
     /// 32 as the builder uses them.
     #[test]
@@ -1229,11 +1194,14 @@ mod tests {
                     sc[a] = v;
                 }
             }
-            let mut fast = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
-            let mut plain = ([[0u32; BINS]; 3], [[0u32; BINS]; 3]);
-            count_bins(&items, tlo, sc, top, &mut fast.0, &mut fast.1);
-            count_bins_portable(&items, tlo, sc, top, &mut plain.0, &mut plain.1);
-            assert_eq!(fast, plain, "case {case}");
+            for it in &items {
+                for x in [&it.lo, &it.hi] {
+                    let want = bins_portable(x, tlo, sc, top);
+                    assert!(want.iter().all(|&b| b < bins), "case {case}: {want:?}");
+                    #[cfg(target_arch = "x86_64")]
+                    assert_eq!(bins_sse2(x, tlo, sc, top), want, "case {case}");
+                }
+            }
         }
     }
 
