@@ -19,8 +19,8 @@
 //!   (`max_references_per_triangle · N`), the share of a child proportional to its triangles, so no
 //!   subtree can spend another's; a node that would exceed its share becomes a leaf and is counted
 //!   (`Built::budget_leaves`).
-//! - **Order**: a node's two children side by side, allocated when it is split; subtrees depth
-//!   first. Each level is linear in its
+//! - **Order**: a node's two children side by side at an even index (an unused slot follows the
+//!   root), allocated when it is split; subtrees depth first. Each level is linear in its
 //!   triangles (binning, partition) or `n log n` in a node of at most `exact_below` (the sort), so the
 //!   whole build is O(N log N).
 //!
@@ -623,8 +623,13 @@ pub(super) fn build(
         work_limit,
     };
     let result = b.root_items(live).map_err(Stop::from).and_then(|()| {
-        b.budget
-            .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
+        // The root, then an unused slot, so that every pair of children (pushed two at a time)
+        // starts at an even index: the traversal finds the far child as `near ^ 1`, and a pair
+        // (16 bytes, 16-aligned) never straddles a cache line.
+        for _ in 0..2 {
+            b.budget
+                .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
+        }
         b.node(0, 0, LOWER, root, refs_allowed.max(live), 0, false)
     });
     let Builder {
@@ -766,8 +771,9 @@ impl Builder<'_> {
         left_box.max[split.axis] = split.pos;
         right_box.min[split.axis] = split.pos;
         let mark = (self.prims.len(), self.leaves, self.references);
-        // The children side by side, after every node made so far.
+        // The children side by side, after every node made so far (an even index: see the root).
         let children = self.nodes.len();
+        debug_assert!(children % 2 == 0);
         if children > MAX_CHILD_INDEX as usize {
             return Err(Stop::Failed(BuildError::CapacityExceeded {
                 what: "kd-tree nodes (at most 2^28)",

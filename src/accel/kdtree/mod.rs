@@ -236,9 +236,10 @@ impl KdTree {
         self.work
     }
 
-    /// Nodes in the tree (interior and leaves).
+    /// Nodes in the tree (interior and leaves; not the unused slot after the root that aligns the
+    /// children pairs): `2·interior + 1`.
     pub fn node_count(&self) -> usize {
-        self.nodes.len()
+        self.nodes.len().saturating_sub(1)
     }
 
     /// Leaves in the tree.

@@ -4,9 +4,9 @@
 ///
 /// - interior: `a` = the split position's f32 bits; `b` = `children << 4 | empty_above << 3 |
 ///   empty_below << 2 | axis` (axis 0..=2), where the children are the nodes `children` (below the
-///   plane) and `children + 1` (above it), side by side so that a ray picks its near child by adding
-///   its direction's sign, and the two flags say that a child is a leaf without triangles, so the
-///   traversal need not visit it;
+///   plane, an even index) and `children + 1` (above it), side by side so that a ray picks its near
+///   child by adding its direction's sign and the far one as `near ^ 1`, and the two flags say that
+///   a child is a leaf without triangles, so the traversal need not visit it;
 /// - leaf: `b` = `count << 2 | 3`; `a` = the offset of the leaf's `count` triangles in the tree's
 ///   primitive array.
 #[repr(C)]
@@ -17,6 +17,12 @@ pub struct KdNode {
 }
 
 const _: () = assert!(core::mem::size_of::<KdNode>() == 8);
+
+/// The bit of an interior node's [`KdNode::bits`] that flags its lower child as an empty leaf.
+pub const EMPTY_BELOW: u32 = 1 << 2;
+
+/// The bit of an interior node's [`KdNode::bits`] that flags its upper child as an empty leaf.
+pub const EMPTY_ABOVE: u32 = 1 << 3;
 
 /// The largest leaf count a node can hold (30 bits).
 pub const MAX_NODE_FIELD: u32 = (1 << 30) - 1;
@@ -33,8 +39,8 @@ impl KdNode {
         KdNode {
             a: split.to_bits(),
             b: (children << 4)
-                | (u32::from(empty.1) << 3)
-                | (u32::from(empty.0) << 2)
+                | if empty.1 { EMPTY_ABOVE } else { 0 }
+                | if empty.0 { EMPTY_BELOW } else { 0 }
                 | (axis as u32 & 3),
         }
     }
@@ -71,6 +77,13 @@ impl KdNode {
     #[inline(always)]
     pub fn children(self) -> u32 {
         self.b >> 4
+    }
+
+    /// The second word: for an interior node, its child index, axis and the [`EMPTY_BELOW`] and
+    /// [`EMPTY_ABOVE`] flags.
+    #[inline(always)]
+    pub fn bits(self) -> u32 {
+        self.b
     }
 
     /// Whether an interior node's lower (bit 0) and upper (bit 1) children are empty leaves.

@@ -2,13 +2,18 @@
 //! the traversal's own rounding can never hide a hit.
 //!
 //! Why the widening is enough: a hit at exact `t` is a point `P` of the ray inside a triangle, and
-//! the triangle is referenced by a leaf whose closed box holds `P` (clipping rounds outward). Each
-//! split's `t = (s − o)·(1/d)` is computed with a relative error below 3 f32 roundings, and the hit's
-//! reported `t` is within half an ulp of the exact one; widening every node's interval by 8 ulps of
-//! its ends therefore keeps the reported `t` inside the interval of every node on the way to that
-//! leaf. A subtree is skipped only when the best hit so far is strictly before its widened entry, so
-//! a nearer hit, or an equally near one with a lower id, is never skipped.
+//! the triangle is referenced by a leaf whose closed box holds `P` (clipping rounds outward). The
+//! hit's reported `t` is within half an ulp of the exact one, so it is enough that every node's
+//! interval holds the exact split crossings widened by a few ulps. At the root the box's crossings
+//! are computed and widened by 8 ulps (`widened`). At a split, `t = (s − o)/d` is bracketed by
+//! the two products of `fl(s − o)` with `1/d` rounded and scaled by `1 ± 2^-20` (16 ulps, once per
+//! ray): four roundings of relative size `2^-24` each leave the larger product at least 11 ulps
+//! beyond the exact `t` and the smaller one as far below (or infinite, if a product overflows:
+//! wider still); underflow adds at most half a subnormal unit, covered by `T_FLOOR` on each side. A
+//! subtree is skipped only when the best hit so far is strictly before its widened entry, so a
+//! nearer hit, or an equally near one with a lower id, is never skipped.
 
+use super::node::{EMPTY_ABOVE, EMPTY_BELOW};
 use super::{KdTree, KdWork, MAX_DEPTH};
 use crate::accel::{test_refs, Mailbox, Refs};
 use crate::mesh::TriMesh;
@@ -33,6 +38,23 @@ fn widened(t: f32) -> (f32, f32) {
     let w = t.abs() * T_SLACK + T_FLOOR;
     let w = if w < f32::MAX { w } else { f32::MAX };
     (t - w, t + w)
+}
+
+/// Relative slack of the split crossings' brackets: `2^-20` (16 ulps of f32), exact in `1 ± SLACK`.
+const SPLIT_SLACK: f32 = 1.0 / 1_048_576.0;
+
+/// What a split on one axis needs of the ray, made once per ray.
+#[derive(Clone, Copy, Default)]
+struct AxisRay {
+    org: f32,
+    /// `1/d` times `1 − SPLIT_SLACK` and `1 + SPLIT_SLACK`.
+    inv_dn: f32,
+    inv_up: f32,
+    /// 1 when the near child is the upper one (the ray runs down the axis).
+    near: u32,
+    /// The node bit flagging the near (far) child as empty.
+    near_empty: u32,
+    far_empty: u32,
 }
 
 #[derive(Clone, Copy)]
@@ -61,42 +83,45 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         if tree.bounds.is_empty() {
             return best;
         }
-        // Per ray, per axis: the origin, `1/d`, and whether the ray runs downwards (its near child
-        // is the upper one). `1/d` is `±∞` for a zero component, which makes every split `t` on
+        // Per ray, per axis: the origin, `1/d` scaled down and up by the slack, whether the ray
+        // runs downwards (its near child is the upper one) and the node bits that flag its near and
+        // far child as empty. `1/d` is `±∞` for a zero component, which makes every split `t` on
         // that axis `±∞` (the ray never crosses the plane: the near child holds the origin when `t`
         // is `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children:
         // the ray lies in the plane, which both closed boxes hold). A component whose inverse
         // overflows, or underflows (so its relative error is unbounded), gets NaN: no constraint on
-        // that axis, every split visits both sides. Arrays of four, indexed `& 3`, need no checks.
+        // that axis, every split visits both sides. An array of four, indexed by the node's 2-bit
+        // axis, needs no checks.
         let (o, d) = (r.org, r.dir);
-        let mut org = [0.0f32; 4];
-        let mut inv = [0.0f32; 4];
-        let mut down = [0u32; 4];
+        let mut axes = [AxisRay::default(); 4];
         let (mut t0, mut t1) = (r.tmin, r.tmax);
         let (lo, hi) = (tree.bounds.min, tree.bounds.max);
         for a in 0..3 {
-            org[a] = o[a];
-            down[a] = u32::from(d[a].is_sign_negative());
+            let down = u32::from(d[a].is_sign_negative());
+            let mut inv = 1.0 / d[a];
             if d[a] == 0.0 {
                 // The box is the triangles' exact bounds: a ray outside its slab misses them all.
                 if o[a] < lo[a] || o[a] > hi[a] {
                     return best;
                 }
-                inv[a] = 1.0 / d[a];
-                continue;
+            } else if !(inv.is_finite() && inv.abs() >= f32::MIN_POSITIVE) {
+                inv = f32::NAN;
+            } else {
+                let (ta, tb) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
+                let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
+                let (near, _) = widened(near);
+                let (_, far) = widened(far);
+                t0 = if near > t0 { near } else { t0 };
+                t1 = if far < t1 { far } else { t1 };
             }
-            let ia = 1.0 / d[a];
-            if !(ia.is_finite() && ia.abs() >= f32::MIN_POSITIVE) {
-                inv[a] = f32::NAN;
-                continue;
-            }
-            inv[a] = ia;
-            let (ta, tb) = ((lo[a] - o[a]) * ia, (hi[a] - o[a]) * ia);
-            let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
-            let (near, _) = widened(near);
-            let (_, far) = widened(far);
-            t0 = if near > t0 { near } else { t0 };
-            t1 = if far < t1 { far } else { t1 };
+            axes[a] = AxisRay {
+                org: o[a],
+                inv_dn: inv * (1.0 - SPLIT_SLACK),
+                inv_up: inv * (1.0 + SPLIT_SLACK),
+                near: down,
+                near_empty: EMPTY_BELOW << down,
+                far_empty: EMPTY_ABOVE >> down,
+            };
         }
         if !(t0 <= t1) {
             return best;
@@ -117,22 +142,22 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 work.nodes += 1;
             }
             if !node.is_leaf() {
-                let a = node.axis() & 3;
-                // Near and far children (the near one is the upper for a ray running down the axis),
-                // and whether each is an empty leaf (not worth a visit).
-                let flip = down[a];
-                let near = node.children() + flip;
-                let far = node.children() + (flip ^ 1);
-                let empty = node.empty_children();
-                let near_empty = (empty >> flip) & 1 != 0;
-                let far_empty = (empty >> (flip ^ 1)) & 1 != 0;
-                let (ts_lo, ts_hi) = widened((node.split() - org[a]) * inv[a]);
-                // Comparisons, not `min`/`max`: a NaN bound compares false and leaves the interval
-                // whole, which is what an axis without constraint needs.
+                let ax = &axes[node.axis() & 3];
+                let bits = node.bits();
+                // The split's crossing, bracketed (module docs). Comparisons, not `min`/`max`: a
+                // NaN compares false and leaves the interval whole, which is what an axis without
+                // constraint needs.
+                let diff = node.split() - ax.org;
+                let (p, q) = (diff * ax.inv_dn, diff * ax.inv_up);
+                let (ts_lo, ts_hi) = if p < q { (p, q) } else { (q, p) };
+                let (ts_lo, ts_hi) = (ts_lo - T_FLOOR, ts_hi + T_FLOOR);
                 let near_t1 = if ts_hi < t1 { ts_hi } else { t1 };
                 let far_t0 = if ts_lo > t0 { ts_lo } else { t0 };
-                let go_near = !near_empty && near_t1 >= t0;
-                let go_far = !far_empty && far_t0 <= t1;
+                // Children pairs start at even indices, so the far child is the near one's sibling.
+                let near = node.children() + ax.near;
+                let far = near ^ 1;
+                let go_near = bits & ax.near_empty == 0 && near_t1 >= t0;
+                let go_far = bits & ax.far_empty == 0 && far_t0 <= t1;
                 if go_near {
                     if go_far {
                         // The depth bound (≤ MAX_DEPTH < STACK_SIZE) leaves room: one entry per level.
