@@ -114,9 +114,10 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
         .add(L::splat(2.0).mul(e.mul(e)))
         .mul(L::splat(SLACK32))
         .add(L::splat(EDGE_FLOOR));
-    let low = bound.neg();
-    let pos = L::or(L::or(u.gt(bound), v.gt(bound)), w.gt(bound));
-    let neg = L::or(L::or(u.lt(low), v.lt(low)), w.lt(low));
+    // One edge function above the bound and another below its negative: as the bound is positive,
+    // that is the largest above it and the smallest below its negative.
+    let pos = u.max(v).max(w).gt(bound);
+    let neg = u.min(v).min(w).lt(bound.neg());
     L::bits(L::used(u)) & !L::bits(L::and(pos, neg))
 }
 

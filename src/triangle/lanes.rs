@@ -11,15 +11,17 @@ pub(crate) trait Lanes: Copy {
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
-    /// The larger of each pair (inputs are never NaN where the filter uses it).
+    /// The larger of each pair (where an input is NaN the filter rejects the lane whatever this
+    /// gives: no real triangle's values are NaN).
     fn max(self, o: Self) -> Self;
+    /// The smaller of each pair (NaN as for `max`).
+    fn min(self, o: Self) -> Self;
     fn abs(self) -> Self;
     fn neg(self) -> Self;
     fn gt(self, o: Self) -> Self::Mask;
     fn lt(self, o: Self) -> Self::Mask;
     /// Set where the lane is not NaN.
     fn used(self) -> Self::Mask;
-    fn or(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Bit `k` set where lane `k` of the mask is set.
     fn bits(m: Self::Mask) -> u32;
@@ -71,6 +73,10 @@ impl Lanes for Portable {
         self.map2(o, |a, b| if a > b { a } else { b })
     }
     #[inline(always)]
+    fn min(self, o: Self) -> Self {
+        self.map2(o, |a, b| if a < b { a } else { b })
+    }
+    #[inline(always)]
     fn abs(self) -> Self {
         Portable(self.0.map(|a| f32::from_bits(a.to_bits() & 0x7fff_ffff)))
     }
@@ -91,10 +97,6 @@ impl Lanes for Portable {
         self.cmp(self, |a, b| a == b)
     }
 
-    #[inline(always)]
-    fn or(a: u32, b: u32) -> u32 {
-        a | b
-    }
     #[inline(always)]
     fn and(a: u32, b: u32) -> u32 {
         a & b
@@ -153,6 +155,10 @@ mod sse2 {
             Sse2(unsafe { _mm_max_ps(self.0, o.0) })
         }
         #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_min_ps(self.0, o.0) })
+        }
+        #[inline(always)]
         fn abs(self) -> Self {
             Sse2(unsafe { _mm_and_ps(self.0, _mm_castsi128_ps(_mm_set1_epi32(0x7fff_ffff))) })
         }
@@ -173,10 +179,6 @@ mod sse2 {
             unsafe { _mm_cmpord_ps(self.0, self.0) }
         }
 
-        #[inline(always)]
-        fn or(a: __m128, b: __m128) -> __m128 {
-            unsafe { _mm_or_ps(a, b) }
-        }
         #[inline(always)]
         fn and(a: __m128, b: __m128) -> __m128 {
             unsafe { _mm_and_ps(a, b) }
@@ -229,6 +231,10 @@ mod neon {
             Neon(unsafe { vmaxq_f32(self.0, o.0) })
         }
         #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            Neon(unsafe { vminq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
         fn abs(self) -> Self {
             Neon(unsafe { vabsq_f32(self.0) })
         }
@@ -249,10 +255,6 @@ mod neon {
             unsafe { vceqq_f32(self.0, self.0) }
         }
 
-        #[inline(always)]
-        fn or(a: uint32x4_t, b: uint32x4_t) -> uint32x4_t {
-            unsafe { vorrq_u32(a, b) }
-        }
         #[inline(always)]
         fn and(a: uint32x4_t, b: uint32x4_t) -> uint32x4_t {
             unsafe { vandq_u32(a, b) }
