@@ -75,24 +75,50 @@ const COORD_FLOOR: f32 = 4.2e-45;
 /// bound's arithmetic.
 const EDGE_FLOOR: f32 = 3e-44;
 
-/// The lanes of `block` the exact test might hit, for a ray from `org` with shear `sx, sy`
-/// (bit `k` for lane `k`, of four).
+/// A ray's filter constants in lanes, made once per query so that each block reads them instead of
+/// broadcasting them again: the origin in the kernel's axis order (`kx, ky, kz`) and the shear.
+#[derive(Clone, Copy)]
+pub(crate) struct FilterRay<L> {
+    o: [L; 3],
+    s: [L; 2],
+}
+
+impl<L: Lanes> FilterRay<L> {
+    /// The constants of a ray from `org` with shear `sx, sy`, for the kernel of `KZ`, `SWAP`.
+    #[inline(always)]
+    pub(crate) fn new<const KZ: usize, const SWAP: bool>(org: Vec3, sx: f32, sy: f32) -> Self {
+        let [kx, ky] = axes::<KZ, SWAP>();
+        let o = org.to_array();
+        FilterRay {
+            o: [L::splat(o[kx]), L::splat(o[ky]), L::splat(o[KZ])],
+            s: [L::splat(sx), L::splat(sy)],
+        }
+    }
+}
+
+/// The sheared axes `kx, ky` of the kernel for `KZ`, `SWAP`.
+#[inline(always)]
+const fn axes<const KZ: usize, const SWAP: bool>() -> [usize; 2] {
+    if SWAP {
+        [(KZ + 2) % 3, (KZ + 1) % 3]
+    } else {
+        [(KZ + 1) % 3, (KZ + 2) % 3]
+    }
+}
+
+/// The lanes of `block` the exact test might hit for `ray` (made by `FilterRay::new` with the same
+/// `KZ`, `SWAP`) (bit `k` for lane `k`, of four).
 #[inline(always)]
 pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
-    org: Vec3,
-    sx: f32,
-    sy: f32,
+    ray: &FilterRay<L>,
     block: &Block4,
 ) -> u32 {
-    let kx = if SWAP { (KZ + 2) % 3 } else { (KZ + 1) % 3 };
-    let ky = if SWAP { (KZ + 1) % 3 } else { (KZ + 2) % 3 };
-    let o = org.to_array();
-    let (ox, oy, oz) = (L::splat(o[kx]), L::splat(o[ky]), L::splat(o[KZ]));
-    let (sx, sy) = (L::splat(sx), L::splat(sy));
+    let [kx, ky] = axes::<KZ, SWAP>();
+    let k = [kx, ky, KZ];
     let v = &block.v;
-    let (ax, ay, az) = sheared(&v[0..3], [kx, ky, KZ], [ox, oy, oz], [sx, sy]);
-    let (bx, by, bz) = sheared(&v[3..6], [kx, ky, KZ], [ox, oy, oz], [sx, sy]);
-    let (cx, cy, cz) = sheared(&v[6..9], [kx, ky, KZ], [ox, oy, oz], [sx, sy]);
+    let (ax, ay, az) = sheared(&v[0..3], k, ray.o, ray.s);
+    let (bx, by, bz) = sheared(&v[3..6], k, ray.o, ray.s);
+    let (cx, cy, cz) = sheared(&v[6..9], k, ray.o, ray.s);
     let u = cx.mul(by).sub(cy.mul(bx));
     let v = ax.mul(cy).sub(ay.mul(cx));
     let w = bx.mul(ay).sub(by.mul(ax));

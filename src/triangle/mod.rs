@@ -116,7 +116,16 @@ pub(crate) trait TriangleTest: Copy {
 pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(
     &'a PreparedRay,
     Option<&'a dyn Accept>,
+    filter::FilterRay<lanes::F4>,
 );
+
+impl<'a, const KZ: usize, const SWAP: bool> Kernel<'a, KZ, SWAP> {
+    #[inline(always)]
+    fn new(ray: &'a PreparedRay, accept: Option<&'a dyn Accept>) -> Self {
+        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32);
+        Kernel(ray, accept, lanes)
+    }
+}
 
 impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
     #[inline(always)]
@@ -138,11 +147,10 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
 
     #[inline(always)]
     fn survivors(&self, block: &Block4) -> u32 {
-        let r = self.0;
-        if !r.filter_ok {
+        if !self.0.filter_ok {
             return 0b1111;
         }
-        filter::survivors::<lanes::F4, KZ, SWAP>(r.org, r.sx32, r.sy32, block)
+        filter::survivors::<lanes::F4, KZ, SWAP>(&self.2, block)
     }
 }
 
@@ -270,12 +278,12 @@ impl PreparedRay {
         lp: L,
     ) -> L::Output {
         match self.axes {
-            0 => lp.run(Kernel::<0, false>(self, accept)),
-            1 => lp.run(Kernel::<0, true>(self, accept)),
-            2 => lp.run(Kernel::<1, false>(self, accept)),
-            3 => lp.run(Kernel::<1, true>(self, accept)),
-            4 => lp.run(Kernel::<2, false>(self, accept)),
-            _ => lp.run(Kernel::<2, true>(self, accept)),
+            0 => lp.run(Kernel::<0, false>::new(self, accept)),
+            1 => lp.run(Kernel::<0, true>::new(self, accept)),
+            2 => lp.run(Kernel::<1, false>::new(self, accept)),
+            3 => lp.run(Kernel::<1, true>::new(self, accept)),
+            4 => lp.run(Kernel::<2, false>::new(self, accept)),
+            _ => lp.run(Kernel::<2, true>::new(self, accept)),
         }
     }
 

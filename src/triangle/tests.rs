@@ -205,12 +205,30 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             macro_rules! go {
                 ($l:ty) => {
                     match (kz, swap) {
-                        (0, false) => filter::survivors::<$l, 0, false>(o, r.sx32, r.sy32, &block),
-                        (0, true) => filter::survivors::<$l, 0, true>(o, r.sx32, r.sy32, &block),
-                        (1, false) => filter::survivors::<$l, 1, false>(o, r.sx32, r.sy32, &block),
-                        (1, true) => filter::survivors::<$l, 1, true>(o, r.sx32, r.sy32, &block),
-                        (2, false) => filter::survivors::<$l, 2, false>(o, r.sx32, r.sy32, &block),
-                        _ => filter::survivors::<$l, 2, true>(o, r.sx32, r.sy32, &block),
+                        (0, false) => filter::survivors::<$l, 0, false>(
+                            &filter::FilterRay::new::<0, false>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
+                        (0, true) => filter::survivors::<$l, 0, true>(
+                            &filter::FilterRay::new::<0, true>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
+                        (1, false) => filter::survivors::<$l, 1, false>(
+                            &filter::FilterRay::new::<1, false>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
+                        (1, true) => filter::survivors::<$l, 1, true>(
+                            &filter::FilterRay::new::<1, true>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
+                        (2, false) => filter::survivors::<$l, 2, false>(
+                            &filter::FilterRay::new::<2, false>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
+                        _ => filter::survivors::<$l, 2, true>(
+                            &filter::FilterRay::new::<2, true>(o, r.sx32, r.sy32),
+                            &block,
+                        ),
                     }
                 };
             }
@@ -245,14 +263,14 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             continue;
         };
         let r = r.for_scene(1.0);
-        let kernel = super::Kernel::<2, false>(&r, None);
+        let kernel = super::Kernel::<2, false>::new(&r, None);
         let survivors = match r.axes {
-            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>(&r, None), &block),
-            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>(&r, None), &block),
-            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>(&r, None), &block),
-            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>(&r, None), &block),
+            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>::new(&r, None), &block),
+            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>::new(&r, None), &block),
+            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>::new(&r, None), &block),
+            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>::new(&r, None), &block),
             4 => super::TriangleTest::survivors(&kernel, &block),
-            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>(&r, None), &block),
+            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>::new(&r, None), &block),
         };
         let hits = hit_lanes(&ray, &block);
         assert_eq!(
