@@ -141,10 +141,11 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
         .mul(L::splat(SLACK32))
         .add(L::splat(EDGE_FLOOR));
     // One edge function above the bound and another below its negative: as the bound is positive,
-    // that is the largest above it and the smallest below its negative.
-    let pos = u.max(v).max(w).gt(bound);
-    let neg = u.min(v).min(w).lt(bound.neg());
-    L::bits(L::used(u)) & !L::bits(L::and(pos, neg))
+    // that is the largest above it and the smallest below its negative. The comparisons are negated
+    // ones, so that an unused lane (NaN everywhere) is rejected by the same test.
+    let pos = u.max(v).max(w).nle(bound);
+    let neg = u.min(v).min(w).nge(bound.neg());
+    !L::bits(L::and(pos, neg)) & 0b1111
 }
 
 /// One vertex's lanes (`p`: its x, y, z rows) translated by `o` and sheared by `s` along the axes

@@ -18,10 +18,10 @@ pub(crate) trait Lanes: Copy {
     fn min(self, o: Self) -> Self;
     fn abs(self) -> Self;
     fn neg(self) -> Self;
-    fn gt(self, o: Self) -> Self::Mask;
-    fn lt(self, o: Self) -> Self::Mask;
-    /// Set where the lane is not NaN.
-    fn used(self) -> Self::Mask;
+    /// Set where `self > o` or either is NaN (`!(self <= o)`).
+    fn nle(self, o: Self) -> Self::Mask;
+    /// Set where `self < o` or either is NaN (`!(self >= o)`).
+    fn nge(self, o: Self) -> Self::Mask;
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Bit `k` set where lane `k` of the mask is set.
     fn bits(m: Self::Mask) -> u32;
@@ -85,16 +85,12 @@ impl Lanes for Portable {
         Portable(self.0.map(|a| -a))
     }
     #[inline(always)]
-    fn gt(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| a > b)
+    fn nle(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| !(a <= b))
     }
     #[inline(always)]
-    fn lt(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| a < b)
-    }
-    #[inline(always)]
-    fn used(self) -> u32 {
-        self.cmp(self, |a, b| a == b)
+    fn nge(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| !(a >= b))
     }
 
     #[inline(always)]
@@ -167,16 +163,12 @@ mod sse2 {
             Sse2(unsafe { _mm_xor_ps(self.0, _mm_set1_ps(-0.0)) })
         }
         #[inline(always)]
-        fn gt(self, o: Self) -> __m128 {
-            unsafe { _mm_cmpgt_ps(self.0, o.0) }
+        fn nle(self, o: Self) -> __m128 {
+            unsafe { _mm_cmpnle_ps(self.0, o.0) }
         }
         #[inline(always)]
-        fn lt(self, o: Self) -> __m128 {
-            unsafe { _mm_cmplt_ps(self.0, o.0) }
-        }
-        #[inline(always)]
-        fn used(self) -> __m128 {
-            unsafe { _mm_cmpord_ps(self.0, self.0) }
+        fn nge(self, o: Self) -> __m128 {
+            unsafe { _mm_cmpnge_ps(self.0, o.0) }
         }
 
         #[inline(always)]
@@ -243,16 +235,12 @@ mod neon {
             Neon(unsafe { vnegq_f32(self.0) })
         }
         #[inline(always)]
-        fn gt(self, o: Self) -> uint32x4_t {
-            unsafe { vcgtq_f32(self.0, o.0) }
+        fn nle(self, o: Self) -> uint32x4_t {
+            unsafe { vmvnq_u32(vcleq_f32(self.0, o.0)) }
         }
         #[inline(always)]
-        fn lt(self, o: Self) -> uint32x4_t {
-            unsafe { vcltq_f32(self.0, o.0) }
-        }
-        #[inline(always)]
-        fn used(self) -> uint32x4_t {
-            unsafe { vceqq_f32(self.0, self.0) }
+        fn nge(self, o: Self) -> uint32x4_t {
+            unsafe { vmvnq_u32(vcgeq_f32(self.0, o.0)) }
         }
 
         #[inline(always)]

@@ -303,9 +303,9 @@ fn portable_lanes_do_what_the_vector_lanes_do() {
         );
         let same = |p: Portable, v: F4| {
             let (p, v) = (
-                Portable::bits(Portable::lt(p, Portable::splat(0.0)))
-                    | (Portable::bits(Portable::gt(p, Portable::splat(1.0))) << 4),
-                F4::bits(F4::lt(v, F4::splat(0.0))) | (F4::bits(F4::gt(v, F4::splat(1.0))) << 4),
+                Portable::bits(Portable::nge(p, Portable::splat(0.0)))
+                    | (Portable::bits(Portable::nle(p, Portable::splat(1.0))) << 4),
+                F4::bits(F4::nge(v, F4::splat(0.0))) | (F4::bits(F4::nle(v, F4::splat(1.0))) << 4),
             );
             assert_eq!(p, v);
         };
@@ -317,8 +317,18 @@ fn portable_lanes_do_what_the_vector_lanes_do() {
         same(pa.abs(), va.abs());
         same(pa.neg(), va.neg());
         assert_eq!(
-            Portable::bits(Portable::and(pa.gt(pb), pb.lt(pa))),
-            F4::bits(F4::and(va.gt(vb), vb.lt(va)))
+            Portable::bits(Portable::and(pa.nle(pb), pb.nge(pa))),
+            F4::bits(F4::and(va.nle(vb), vb.nge(va)))
         );
     }
+    // The negated comparisons hold where a lane is NaN: the filter rejects unused lanes by them.
+    let (pn, vn) = (Portable::splat(f32::NAN), F4::splat(f32::NAN));
+    let (p0, v0) = (Portable::splat(0.0), F4::splat(0.0));
+    assert_eq!(
+        Portable::bits(Portable::and(pn.nle(p0), pn.nge(p0))),
+        0b1111
+    );
+    assert_eq!(F4::bits(F4::and(vn.nle(v0), vn.nge(v0))), 0b1111);
+    assert_eq!(Portable::bits(Portable::and(p0.nle(p0), p0.nge(p0))), 0);
+    assert_eq!(F4::bits(F4::and(v0.nle(v0), v0.nge(v0))), 0);
 }
