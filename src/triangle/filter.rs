@@ -66,9 +66,16 @@ impl Block4 {
 
 /// Unit roundoff of f32 (2^-24).
 const U32: f32 = f32::EPSILON / 2.0;
-/// Relative slack on the bound's factors, covering the rounding of its own arithmetic (at most
-/// seven operations on non-negative values: 7·2^-24 < 2^-18).
+/// Relative slack on the bound's factors, covering the rounding of its own arithmetic: at most ten
+/// roundings of non-negative values on any term (the `e²` term: three in `e`, doubled, then the
+/// product, the factor and two sums), and `(1 + 2^-18)·(1 − 2^-24)^10 > 1`.
 const SLACK32: f32 = 1.0 + 1.0 / 262_144.0;
+/// The coefficients of `e = u(2S + 4Z)` and `E = 4u·S² + 4·S·e + 2·e²`, each with the slack.
+const E_S: f32 = 2.0 * U32 * SLACK32;
+const E_Z: f32 = 4.0 * U32 * SLACK32;
+const B_SS: f32 = 4.0 * U32 * SLACK32 * SLACK32;
+const B_SE: f32 = 4.0 * SLACK32;
+const B_EE: f32 = 2.0 * SLACK32;
 /// At least 2^-148 (three subnormal units): what underflow can add to a sheared coordinate.
 const COORD_FLOOR: f32 = 4.2e-45;
 /// At least 2^-145 (21 subnormal units): what underflow can add to an edge function and to the
@@ -129,16 +136,13 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
         .max(by.abs())
         .max(cx.abs().max(cy.abs()));
     let z = az.abs().max(bz.abs()).max(cz.abs());
-    let four = L::splat(4.0);
     let e = s
-        .add(s)
-        .add(four.mul(z))
-        .mul(L::splat(U32 * SLACK32))
+        .mul(L::splat(E_S))
+        .add(z.mul(L::splat(E_Z)))
         .add(L::splat(COORD_FLOOR));
     let bound = s
-        .mul(L::splat(4.0 * U32 * SLACK32).mul(s).add(four.mul(e)))
-        .add(L::splat(2.0).mul(e.mul(e)))
-        .mul(L::splat(SLACK32))
+        .mul(L::splat(B_SS).mul(s).add(L::splat(B_SE).mul(e)))
+        .add(L::splat(B_EE).mul(e.mul(e)))
         .add(L::splat(EDGE_FLOOR));
     // One edge function above the bound and another below its negative: as the bound is positive,
     // that is the largest above it and the smallest below its negative. The comparisons are negated
