@@ -131,12 +131,21 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
         return None;
     }
     debug_assert!(packs.layout() == TriangleLayout::Indexed || start % 4 == 0);
+    // Packed lists start on a block and their last block's other lanes are padding (NaN, rejected
+    // by the filter; id INVALID or past the list, skipped when the filter is off): whole blocks,
+    // read in one pass with no per-block lookup.
+    if let Some(blocks) = packs.blocks(start / 4, end.div_ceil(4)) {
+        let id = |block: usize, lane: usize| {
+            ids.get(start + 4 * block + lane)
+                .copied()
+                .unwrap_or(Hit::INVALID_ID)
+        };
+        return test_blocks::<T, ANY>(test, blocks, id, best, mailbox);
+    }
     let mut base = start & !3;
     while base < end {
         let gathered;
         let (block, lanes) = match packs.block(base / 4) {
-            // Packed lists start on a block and their last block's other lanes are padding (NaN,
-            // rejected by the filter; id INVALID, skipped when the filter is off): no lane mask.
             Some(b) => (b, 0b1111),
             None => {
                 let lanes = lanes_in(start, end, base);
@@ -166,23 +175,23 @@ pub(crate) fn counted_hit<T: TriangleTest>(test: &T, prim: u32, tri: &[Vec3; 3])
     })
 }
 
-/// Tests whole blocks of a block-aligned list: lane `k` of `tris[b]` holds the triangle `ids[b][k]`
+/// Tests whole blocks of a block-aligned list: lane `k` of `tris[b]` holds the triangle `id(b, k)`
 /// (`Hit::INVALID_ID` and NaN in unused lanes). The same answer as [`test_refs`] on the same list:
 /// the best hit kept in `best` by [`Hit::beats`], or with `ANY` the first hit at once.
 #[inline(always)]
 pub(crate) fn test_blocks<T: TriangleTest, const ANY: bool>(
     test: &T,
     tris: &[Block4],
-    ids: &[[u32; 4]],
+    id: impl Fn(usize, usize) -> u32,
     best: &mut Hit,
     mailbox: &mut Mailbox,
 ) -> Option<Hit> {
-    for (block, ids) in tris.iter().zip(ids) {
+    for (b, block) in tris.iter().enumerate() {
         let survivors = test.survivors(block);
         if survivors == 0 {
             continue;
         }
-        let id = |lane: usize| ids[lane & 3];
+        let id = |lane: usize| id(b, lane);
         if let Some(h) = test_lanes::<T, ANY>(test, block, survivors, id, best, mailbox) {
             return Some(h);
         }

@@ -55,6 +55,15 @@ impl TrianglePacks {
         Ok(TrianglePacks { blocks })
     }
 
+    /// Blocks `first..end`, or `None` when there are no packs (indexed layout) or no such blocks.
+    #[inline(always)]
+    pub fn blocks(&self, first: usize, end: usize) -> Option<&[Block4]> {
+        if self.blocks.is_empty() {
+            return None;
+        }
+        self.blocks.get(first..end)
+    }
+
     /// Block `i`, or `None` when there are no packs (indexed layout) or no such block.
     #[inline(always)]
     pub fn block(&self, i: usize) -> Option<&Block4> {

@@ -267,7 +267,11 @@ impl UniformGrid {
                         tris.get_unchecked(first..end),
                     )
                 };
-                test_blocks::<T, ANY>(test, tris, ids, best, mailbox)
+                let id = |block: usize, lane: usize| {
+                    ids.get(block)
+                        .map_or(Hit::INVALID_ID, |four| four[lane & 3])
+                };
+                test_blocks::<T, ANY>(test, tris, id, best, mailbox)
             }
             Lists::Indexed { ids, packs } => {
                 test_refs::<T, ANY>(test, mesh, Refs { ids, packs }, (first, end), best, mailbox)
