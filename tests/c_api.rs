@@ -865,10 +865,13 @@ fn c_embedded() {
 /// first recorded; 252 256 after the grid's slab walk for long slivers, budget raised to 265 000;
 /// 301 408 with the exact three-stage test and the new kd-tree, raised to 315 000; 317 792 with
 /// scenes of several geometries (the conditions' path through every walk, the selection shared with
-/// `rq_scene_set_vertices`) and the grid of issue 13, raised to 334 000). To raise it on purpose: run
+/// `rq_scene_set_vertices`) and the grid of issue 13, raised to 334 000; 346 464 at stop 21 with the
+/// lean kd-tree walk and the filter that first tries the scene's bound, inline in every walk (out
+/// of line, the program stays at 334 176 bytes but the rays take 1.01–1.29× the time: measured),
+/// raised to 364 000). To raise it on purpose: run
 /// `cargo test --test c_api embedded_minimal -- --nocapture`, note the size it prints, set this to
 /// about 5 % above it, and update docs/embedded.md.
-const MINIMAL_PROGRAM_BUDGET: u64 = 334_000;
+const MINIMAL_PROGRAM_BUDGET: u64 = 364_000;
 
 #[test]
 #[cfg(all(target_os = "linux", target_arch = "x86_64"))]

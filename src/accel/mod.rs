@@ -49,7 +49,7 @@ pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
     accept: Option<&dyn Accept>,
     walk: L,
 ) -> Hit {
-    match PreparedRay::prepare(ray, mesh.coordinate_bound()) {
+    match PreparedRay::prepare(ray, &mesh.bounds()) {
         Some(r) => r.dispatch_accepting(accept, walk),
         None => Hit::MISS,
     }

@@ -10,6 +10,11 @@
 //! distance. A lane is rejected only when one edge function is above `E` and another below `−E`: then
 //! the exact ones have mixed signs, and the exact test misses.
 //!
+//! A block is first checked against the scene's bound: `E` for the largest `S` and `Z` any triangle
+//! of the scene can have for this ray (from the distances of the origin to the scene's box), made
+//! once per query. It is at least every lane's own `E`, so what it rejects the lanes' bounds reject
+//! too; most blocks are settled by it, and only the others compute their lanes' `S`, `Z` and `E`.
+//!
 //! The bound needs every value to stay finite; preparing the ray for the scene turns the filter
 //! off (every lane survives) when coordinates or the origin reach 2^60. Below that no real triangle
 //! gives a NaN, so a lane whose edge function is NaN is an unused one (NaN coordinates, the padding
@@ -83,22 +88,52 @@ const COORD_FLOOR: f32 = 4.2e-45;
 const EDGE_FLOOR: f32 = 3e-44;
 
 /// A ray's filter constants in lanes, made once per query so that each block reads them instead of
-/// broadcasting them again: the origin in the kernel's axis order (`kx, ky, kz`) and the shear.
+/// broadcasting them again: the origin in the kernel's axis order (`kx, ky, kz`), the shear, and
+/// the bound for the whole scene (`E` of the largest `S` and `Z` any triangle of the scene can
+/// have for this ray, and its negative).
 #[derive(Clone, Copy)]
 pub(crate) struct FilterRay<L> {
     o: [L; 3],
     s: [L; 2],
+    scene_bound: L,
+    scene_low: L,
 }
 
+/// Relative slack of the per-ray `S` and `Z`: covers the rounding of the distances to the box, of
+/// a vertex's translation and shear (against which they bound), and of their own arithmetic: at
+/// most eight roundings, `(1 − 2^-24)^8·(1 + 2^-20) > (1 + 2^-24)^0`.
+const SCENE_SLACK: f32 = 1.0 + 1.0 / 1_048_576.0;
+/// At least twice what underflow can add to a sheared coordinate (2^-149): 2^-140.
+const SCENE_FLOOR: f32 = 7.2e-43;
+
 impl<L: Lanes> FilterRay<L> {
-    /// The constants of a ray from `org` with shear `sx, sy`, for the kernel of `KZ`, `SWAP`.
+    /// The constants of a ray from `org` with shear `sx, sy`, for the kernel of `KZ`, `SWAP`, in a
+    /// scene whose non-degenerate triangles are within `reach[a]` of the origin along each axis `a`.
+    ///
+    /// The scene's bound is at least every lane's (`bound` is monotone: every operation on
+    /// non-negative values rounds monotonically), because its `S` and `Z` are at least any
+    /// triangle's: a vertex's computed `|x̂| ≤ (|p_kx − o_kx| + |ŝ|·|p_kz − o_kz|)·(1 + 2^-24)^3`
+    /// plus underflow, and `|p_a − o_a| ≤ reach[a]` up to one rounding.
     #[inline(always)]
-    pub(crate) fn new<const KZ: usize, const SWAP: bool>(org: Vec3, sx: f32, sy: f32) -> Self {
+    pub(crate) fn new<const KZ: usize, const SWAP: bool>(
+        org: Vec3,
+        sx: f32,
+        sy: f32,
+        reach: Vec3,
+    ) -> Self {
         let [kx, ky] = axes::<KZ, SWAP>();
-        let o = org.to_array();
+        let (o, r) = (org.to_array(), reach.to_array());
+        let z = r[KZ] * SCENE_SLACK + SCENE_FLOOR;
+        let s =
+            (r[kx] + sx.abs() * r[KZ]).max(r[ky] + sy.abs() * r[KZ]) * SCENE_SLACK + SCENE_FLOOR;
+        // A NaN (an infinite reach times a zero shear) would reject everything: no bound instead.
+        let finite_or_inf = |x: f32| if x <= f32::MAX { x } else { f32::INFINITY };
+        let scene_bound = bound(L::splat(finite_or_inf(s)), L::splat(finite_or_inf(z)));
         FilterRay {
             o: [L::splat(o[kx]), L::splat(o[ky]), L::splat(o[KZ])],
             s: [L::splat(sx), L::splat(sy)],
+            scene_bound,
+            scene_low: scene_bound.neg(),
         }
     }
 }
@@ -129,6 +164,16 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
     let u = cx.mul(by).sub(cy.mul(bx));
     let v = ax.mul(cy).sub(ay.mul(cx));
     let w = bx.mul(ay).sub(by.mul(ax));
+    // One edge function above the bound and another below its negative: as the bound is positive,
+    // that is the largest above it and the smallest below its negative. The comparisons are negated
+    // ones, so that an unused lane (NaN everywhere) is rejected by the same test.
+    let (most, least) = (u.max(v).max(w), u.min(v).min(w));
+    let rejected = |bound: L, low: L| L::bits(L::and(most.nle(bound), least.nge(low)));
+    // First against the scene's bound (at least every lane's): most blocks are settled here,
+    // without their own bounds.
+    if rejected(ray.scene_bound, ray.scene_low) == 0b1111 {
+        return 0;
+    }
     let s = ax
         .abs()
         .max(ay.abs())
@@ -136,20 +181,21 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
         .max(by.abs())
         .max(cx.abs().max(cy.abs()));
     let z = az.abs().max(bz.abs()).max(cz.abs());
+    let bound = bound(s, z);
+    !rejected(bound, bound.neg()) & 0b1111
+}
+
+/// The bound `E` on the error of the edge functions of triangles whose sheared `|x|, |y|` are at
+/// most `s` and translated `|z|` at most `z` (module docs), with the slack for its own rounding.
+#[inline(always)]
+fn bound<L: Lanes>(s: L, z: L) -> L {
     let e = s
         .mul(L::splat(E_S))
         .add(z.mul(L::splat(E_Z)))
         .add(L::splat(COORD_FLOOR));
-    let bound = s
-        .mul(L::splat(B_SS).mul(s).add(L::splat(B_SE).mul(e)))
+    s.mul(L::splat(B_SS).mul(s).add(L::splat(B_SE).mul(e)))
         .add(L::splat(B_EE).mul(e.mul(e)))
-        .add(L::splat(EDGE_FLOOR));
-    // One edge function above the bound and another below its negative: as the bound is positive,
-    // that is the largest above it and the smallest below its negative. The comparisons are negated
-    // ones, so that an unused lane (NaN everywhere) is rejected by the same test.
-    let pos = u.max(v).max(w).nle(bound);
-    let neg = u.min(v).min(w).nge(bound.neg());
-    !L::bits(L::and(pos, neg)) & 0b1111
+        .add(L::splat(EDGE_FLOOR))
 }
 
 /// One vertex's lanes (`p`: its x, y, z rows) translated by `o` and sheared by `s` along the axes

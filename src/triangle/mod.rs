@@ -18,7 +18,7 @@
 
 use glam::Vec3;
 
-use crate::ray::Ray;
+use crate::ray::{Aabb, Ray};
 
 mod exact;
 pub mod filter;
@@ -66,6 +66,9 @@ pub struct PreparedRay {
     /// Whether the f32 filter may run: set when the ray is prepared for a scene (`prepare`) where
     /// no f32 value of the filter can overflow.
     filter_ok: bool,
+    /// Per axis, at least the largest distance from the origin to the scene's box (`∞` when the
+    /// scene is not known): the filter's per-ray bound on every triangle's edge functions.
+    reach: Vec3,
 }
 
 /// A loop over triangles that wants the triangle test specialised for the ray's axis permutation:
@@ -122,7 +125,7 @@ pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(
 impl<'a, const KZ: usize, const SWAP: bool> Kernel<'a, KZ, SWAP> {
     #[inline(always)]
     fn new(ray: &'a PreparedRay, accept: Option<&'a dyn Accept>) -> Self {
-        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32);
+        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32, ray.reach);
         Kernel(ray, accept, lanes)
     }
 }
@@ -187,19 +190,24 @@ impl PreparedRay {
     /// direction, a NaN bound, or `tmin > tmax`.
     #[inline]
     pub fn new(ray: &Ray) -> Option<PreparedRay> {
-        // An infinite scale leaves the filter off (the queries turn it on for their scene).
-        Self::prepare(ray, f32::INFINITY)
+        // An unbounded scene leaves the filter off (the queries turn it on for their scene).
+        let everywhere = Aabb {
+            min: Vec3::NEG_INFINITY,
+            max: Vec3::INFINITY,
+        };
+        Self::prepare(ray, &everywhere)
     }
 
-    /// [`PreparedRay::new`] with the filter allowed for triangles whose coordinates are at most
-    /// `scale` in magnitude (see `for_scene`), always inline: the queries' one entry
+    /// [`PreparedRay::new`] with the filter allowed for the non-degenerate triangles inside `scene`
+    /// (see `for_scene`; degenerate ones the exact test always misses), always inline: the queries'
+    /// one entry
     /// ([`crate::accel::run_query`]) then builds the ray once, in place, instead of returning it
     /// through memory and copying it.
     ///
     /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
     /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).
     #[inline(always)]
-    pub(crate) fn prepare(ray: &Ray, scale: f32) -> Option<PreparedRay> {
+    pub(crate) fn prepare(ray: &Ray, scene: &Aabb) -> Option<PreparedRay> {
         let (o, d) = (ray.org, ray.dir);
         // `x − x` is +0 for a finite `x` and NaN for ±∞ and NaN, so the sum is 0 exactly when all
         // six components are finite. NaN bounds fail `<=`; an infinite tmin is allowed only as an
@@ -242,7 +250,8 @@ impl PreparedRay {
             sz: 1.0 / f64::from(dz),
             sx32: dx / dz,
             sy32: dy / dz,
-            filter_ok: Self::filter_may_run(o, scale),
+            filter_ok: Self::filter_may_run(o, scene.min.abs().max(scene.max.abs()).max_element()),
+            reach: (scene.min - o).abs().max((scene.max - o).abs()),
         })
     }
 
@@ -253,6 +262,8 @@ impl PreparedRay {
     #[cfg(test)]
     pub(crate) fn for_scene(mut self, scale: f32) -> Self {
         self.filter_ok = Self::filter_may_run(self.org, scale);
+        // The box `[−scale, scale]³`, seen from the origin (rounded up).
+        self.reach = (self.org.abs() + Vec3::splat(scale)) * (1.0 + f32::EPSILON);
         self
     }
 

@@ -7,7 +7,7 @@ use super::exact::ExactTriangle;
 use super::lanes::{Lanes, Portable, F4};
 use super::testgen::{log_uniform, pair, point, signed};
 use super::{filter, Block4, PreparedRay};
-use crate::ray::Ray;
+use crate::ray::{Aabb, Ray};
 use crate::workload::SplitMix64;
 
 /// The definition, computed in exact integers throughout: the line meets the closed triangle (exact
@@ -172,6 +172,51 @@ fn rays_that_cannot_hit_are_refused() {
     assert_eq!(check(&far, &tri), None);
 }
 
+/// The lanes of `block` the query's filter lets through for `r` (through the kernel, as queries
+/// run it).
+fn kernel_survivors(r: &PreparedRay, block: &Block4) -> u32 {
+    use super::{Kernel, TriangleTest};
+    match r.axes {
+        0 => Kernel::<0, false>::new(r, None).survivors(block),
+        1 => Kernel::<0, true>::new(r, None).survivors(block),
+        2 => Kernel::<1, false>::new(r, None).survivors(block),
+        3 => Kernel::<1, true>::new(r, None).survivors(block),
+        4 => Kernel::<2, false>::new(r, None).survivors(block),
+        _ => Kernel::<2, true>::new(r, None).survivors(block),
+    }
+}
+
+/// The scene's bound, the filter's first check, never rejects a hit: each block's scene is the box
+/// of its own triangle (in every lane, its vertices rotated), so that the scene's bound is as tight
+/// as it gets. (A scene bound cut to 1/100 fails this test.)
+#[test]
+fn the_scene_bound_never_rejects_a_hit() {
+    let mut rng = SplitMix64::new(0x5b);
+    let mut checked = 0u32;
+    for case in 0..100_000 {
+        let (ray, tri) = pair(&mut rng, case);
+        let mut block = Block4::default();
+        for lane in 0..4 {
+            let rotated = [tri[lane % 3], tri[(lane + 1) % 3], tri[(lane + 2) % 3]];
+            block.set(lane, &rotated);
+        }
+        let Some(r) = PreparedRay::prepare(&ray, &Aabb::of_triangle(&tri)) else {
+            continue;
+        };
+        if !r.filter_ok {
+            continue;
+        }
+        checked += 1;
+        let hits = hit_lanes(&ray, &block);
+        assert_eq!(
+            hits & !kernel_survivors(&r, &block),
+            0,
+            "filter rejected a hit: {ray:?} {tri:?}"
+        );
+    }
+    assert!(checked > 50_000, "{checked}");
+}
+
 /// The lanes the exact test hits, for the four triangles of `block`.
 fn hit_lanes(ray: &Ray, block: &Block4) -> u32 {
     (0..4).fold(0, |m, k| {
@@ -206,27 +251,27 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
                 ($l:ty) => {
                     match (kz, swap) {
                         (0, false) => filter::survivors::<$l, 0, false>(
-                            &filter::FilterRay::new::<0, false>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<0, false>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                         (0, true) => filter::survivors::<$l, 0, true>(
-                            &filter::FilterRay::new::<0, true>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<0, true>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                         (1, false) => filter::survivors::<$l, 1, false>(
-                            &filter::FilterRay::new::<1, false>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<1, false>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                         (1, true) => filter::survivors::<$l, 1, true>(
-                            &filter::FilterRay::new::<1, true>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<1, true>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                         (2, false) => filter::survivors::<$l, 2, false>(
-                            &filter::FilterRay::new::<2, false>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<2, false>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                         _ => filter::survivors::<$l, 2, true>(
-                            &filter::FilterRay::new::<2, true>(o, r.sx32, r.sy32),
+                            &filter::FilterRay::new::<2, true>(o, r.sx32, r.sy32, r.reach),
                             &block,
                         ),
                     }
@@ -262,16 +307,7 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
         let Some(r) = PreparedRay::new(&ray) else {
             continue;
         };
-        let r = r.for_scene(1.0);
-        let kernel = super::Kernel::<2, false>::new(&r, None);
-        let survivors = match r.axes {
-            0 => super::TriangleTest::survivors(&super::Kernel::<0, false>::new(&r, None), &block),
-            1 => super::TriangleTest::survivors(&super::Kernel::<0, true>::new(&r, None), &block),
-            2 => super::TriangleTest::survivors(&super::Kernel::<1, false>::new(&r, None), &block),
-            3 => super::TriangleTest::survivors(&super::Kernel::<1, true>::new(&r, None), &block),
-            4 => super::TriangleTest::survivors(&kernel, &block),
-            _ => super::TriangleTest::survivors(&super::Kernel::<2, true>::new(&r, None), &block),
-        };
+        let survivors = kernel_survivors(&r.for_scene(1.0), &block);
         let hits = hit_lanes(&ray, &block);
         assert_eq!(
             hits & !survivors,
