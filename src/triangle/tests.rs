@@ -243,37 +243,25 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             .flat_map(|k| block.get(k))
             .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
         let r = r.for_scene(scale);
-        let o = r.org;
         let kz = usize::from(r.axes / 2);
         let swap = r.axes % 2 == 1;
         let run = |portable: bool| -> u32 {
+            fn with<L: Lanes, const KZ: usize, const SWAP: bool>(
+                r: &PreparedRay,
+                block: &Block4,
+            ) -> u32 {
+                let ray = filter::FilterRay::<L>::new::<KZ, SWAP>(r.org, r.sx32, r.sy32, r.reach);
+                filter::survivors::<L, KZ, SWAP>(&ray, block)
+            }
             macro_rules! go {
                 ($l:ty) => {
                     match (kz, swap) {
-                        (0, false) => filter::survivors::<$l, 0, false>(
-                            &filter::FilterRay::new::<0, false>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
-                        (0, true) => filter::survivors::<$l, 0, true>(
-                            &filter::FilterRay::new::<0, true>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
-                        (1, false) => filter::survivors::<$l, 1, false>(
-                            &filter::FilterRay::new::<1, false>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
-                        (1, true) => filter::survivors::<$l, 1, true>(
-                            &filter::FilterRay::new::<1, true>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
-                        (2, false) => filter::survivors::<$l, 2, false>(
-                            &filter::FilterRay::new::<2, false>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
-                        _ => filter::survivors::<$l, 2, true>(
-                            &filter::FilterRay::new::<2, true>(o, r.sx32, r.sy32, r.reach),
-                            &block,
-                        ),
+                        (0, false) => with::<$l, 0, false>(&r, &block),
+                        (0, true) => with::<$l, 0, true>(&r, &block),
+                        (1, false) => with::<$l, 1, false>(&r, &block),
+                        (1, true) => with::<$l, 1, true>(&r, &block),
+                        (2, false) => with::<$l, 2, false>(&r, &block),
+                        _ => with::<$l, 2, true>(&r, &block),
                     }
                 };
             }
