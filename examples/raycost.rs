@@ -1,0 +1,134 @@
+//! Per-ray cost of the two structures on one scene, for profiling: traces the workload's rays
+//! (128² camera rays plus one diffuse bounce per hit) through the kd-tree or the grid, or times
+//! both, or prints what a ray does in each.
+//!
+//!     cargo build --release --example raycost
+//!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7
+//!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
+//!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
+//!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
+//!
+//! (`grid` and `raycost::grid_trace` for the grid.) A scene is a name in `../shared/scenes` or
+//! `scenes` (without `.obj`), or a procedural one as `NAME-COUNT` (`hair-50k`, `stadium-1000k`).
+//! The instructions per ray are callgrind's total over the printed number of rays.
+
+use std::time::Instant;
+
+use rayq::accel::grid::GridWork;
+use rayq::accel::kdtree::KdWork;
+use rayq::accel::RayQuery;
+use rayq::mesh::MeshData;
+use rayq::workload::{bounce_rays, camera_rays, SplitMix64};
+use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, Ray, TriMesh, UniformGrid};
+
+fn load(name: &str) -> Option<MeshData> {
+    let root = env!("CARGO_MANIFEST_DIR");
+    for dir in [format!("{root}/../shared/scenes"), format!("{root}/scenes")] {
+        if let Ok(m) = rayq::obj::load_obj(format!("{dir}/{name}.obj")) {
+            return Some(m);
+        }
+    }
+    let (generator, count) = name.rsplit_once('-')?;
+    let count = match count.strip_suffix('k') {
+        Some(k) => k.parse::<usize>().ok()? * 1000,
+        None => count.parse().ok()?,
+    };
+    rayq::procedural::by_name(generator, count)
+}
+
+#[inline(never)]
+fn kd_trace(tree: &KdTree, mesh: &TriMesh, rays: &[Ray]) -> u32 {
+    rays.iter().fold(0u32, |acc, r| {
+        acc.wrapping_add(tree.intersect(mesh, r).prim)
+    })
+}
+
+#[inline(never)]
+fn grid_trace(grid: &UniformGrid, mesh: &TriMesh, rays: &[Ray]) -> u32 {
+    rays.iter().fold(0u32, |acc, r| {
+        acc.wrapping_add(grid.intersect(mesh, r).prim)
+    })
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let (Some(mode), Some(reps)) = (
+        args.first(),
+        args.get(1).and_then(|r| r.parse::<usize>().ok()),
+    ) else {
+        eprintln!("usage: raycost kd|grid|time|stats REPEATS SCENE...");
+        std::process::exit(2);
+    };
+    let reps = reps.max(1);
+    for name in &args[2..] {
+        let Some(data) = load(name) else {
+            eprintln!("{name}: no such scene");
+            std::process::exit(2);
+        };
+        let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+        let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+        let grid =
+            UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+        let mut rng = SplitMix64::new(7);
+        let mut rays = camera_rays(&mesh.bounds(), 128, &mut rng);
+        let hits: Vec<_> = rays.iter().map(|r| tree.intersect(&mesh, r)).collect();
+        let bounces = bounce_rays(&mesh, &rays, &hits, &mut rng);
+        rays.extend(bounces);
+        let n = rays.len() as f64;
+        match mode.as_str() {
+            "kd" => println!(
+                "{name} {} rays {}",
+                rays.len(),
+                kd_trace(&tree, &mesh, &rays)
+            ),
+            "grid" => println!(
+                "{name} {} rays {}",
+                rays.len(),
+                grid_trace(&grid, &mesh, &rays)
+            ),
+            "time" => {
+                let (mut kd, mut gr) = (Vec::new(), Vec::new());
+                for _ in 0..reps {
+                    let t = Instant::now();
+                    std::hint::black_box(kd_trace(&tree, &mesh, &rays));
+                    kd.push(t.elapsed().as_secs_f64());
+                    let t = Instant::now();
+                    std::hint::black_box(grid_trace(&grid, &mesh, &rays));
+                    gr.push(t.elapsed().as_secs_f64());
+                }
+                println!(
+                    "{name:>16} N {:>8} kd {:7.1} ns/ray grid {:7.1} ns/ray",
+                    mesh.len(),
+                    median(kd) * 1e9 / n,
+                    median(gr) * 1e9 / n
+                );
+            }
+            "stats" => {
+                let (mut kw, mut gw) = (KdWork::default(), GridWork::default());
+                for r in &rays {
+                    tree.intersect_counted(&mesh, r, &mut kw);
+                    grid.intersect_counted(&mesh, r, &mut gw);
+                }
+                println!(
+                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1}",
+                    f64::from(kw.nodes) / n,
+                    f64::from(kw.leaves) / n,
+                    f64::from(kw.tests) / n,
+                    tree.depth(),
+                    tree.leaf_count(),
+                    f64::from(gw.cells) / n,
+                    f64::from(gw.tests) / n
+                );
+            }
+            _ => {
+                eprintln!("unknown mode {mode}: kd, grid, time or stats");
+                std::process::exit(2);
+            }
+        }
+    }
+}
