@@ -80,10 +80,23 @@ impl RayQuery for BruteForce {
 
 impl AcceptingQuery for BruteForce {
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
-        run_query(mesh, ray, accept, AllTriangles::<false> { mesh })
+        run_query(
+            mesh,
+            Aabb::EMPTY,
+            ray,
+            accept,
+            AllTriangles::<false> { mesh },
+        )
     }
 
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
-        run_query(mesh, ray, accept, AllTriangles::<true> { mesh }).is_hit()
+        run_query(
+            mesh,
+            Aabb::EMPTY,
+            ray,
+            accept,
+            AllTriangles::<true> { mesh },
+        )
+        .is_hit()
     }
 }

@@ -40,16 +40,20 @@ pub(crate) trait AcceptingQuery {
 
 /// Prepares `ray` for the triangles of `mesh` and runs `walk` with the triangle test specialised for
 /// the ray's axes (and the query's conditions on hits, `accept`): the one entry of every
-/// structure's queries. A ray that can hit nothing (see [`PreparedRay::new`]) is a miss without a
-/// walk.
+/// structure's queries. `held` is a box holding the triangles the structure holds copies of (its
+/// bounds; [`Aabb::EMPTY`] for a walk that reads only `mesh`): the filter's per-ray bound needs a
+/// box holding every triangle it is given, and a structure's copies are those of the mesh it was
+/// built over, which need not be `mesh` now. A ray that can hit nothing (see [`PreparedRay::new`])
+/// is a miss without a walk.
 #[inline(always)]
 pub(crate) fn run_query<L: TriangleLoop<Output = Hit>>(
     mesh: &TriMesh,
+    held: Aabb,
     ray: &Ray,
     accept: Option<&dyn Accept>,
     walk: L,
 ) -> Hit {
-    match PreparedRay::prepare(ray, &mesh.bounds()) {
+    match PreparedRay::prepare(ray, &mesh.bounds().union(held)) {
         Some(r) => r.dispatch_accepting(accept, walk),
         None => Hit::MISS,
     }
@@ -294,6 +298,7 @@ mod tests {
         }
         let closest = run_query(
             mesh,
+            Aabb::EMPTY,
             ray,
             None,
             List::<false> {
@@ -305,6 +310,7 @@ mod tests {
         );
         let any = run_query(
             mesh,
+            Aabb::EMPTY,
             ray,
             None,
             List::<true> {
@@ -327,7 +333,7 @@ mod tests {
                 test_all::<T, false>(&test, self.0)
             }
         }
-        run_query(mesh, ray, None, All(mesh))
+        run_query(mesh, Aabb::EMPTY, ray, None, All(mesh))
     }
 
     /// The four-wide list test, packed (block-aligned lists) and indexed (gathered, unaligned

@@ -99,21 +99,25 @@ pub(crate) struct FilterRay<L> {
     scene_low: L,
 }
 
-/// Relative slack of the per-ray `S` and `Z`: covers the rounding of the distances to the box, of
-/// a vertex's translation and shear (against which they bound), and of their own arithmetic: at
-/// most eight roundings, `(1 − 2^-24)^8·(1 + 2^-20) > (1 + 2^-24)^0`.
+/// Relative slack of the per-ray `S` and `Z`. Not needed by the argument (see `FilterRay::new`:
+/// rounding is monotone, so the per-ray values computed with the filter's own operations already
+/// bound the lanes'); kept as insurance against a later change of either computation.
 const SCENE_SLACK: f32 = 1.0 + 1.0 / 1_048_576.0;
-/// At least twice what underflow can add to a sheared coordinate (2^-149): 2^-140.
+/// Absolute slack of the per-ray `S` and `Z` (2^-140, far above an underflow's 2^-149), for the
+/// same reason.
 const SCENE_FLOOR: f32 = 7.2e-43;
 
 impl<L: Lanes> FilterRay<L> {
-    /// The constants of a ray from `org` with shear `sx, sy`, for the kernel of `KZ`, `SWAP`, in a
-    /// scene whose non-degenerate triangles are within `reach[a]` of the origin along each axis `a`.
+    /// The constants of a ray from `org` with shear `sx, sy`, for the kernel of `KZ`, `SWAP`, for
+    /// triangles inside a box whose farther face along each axis `a` is `reach[a]` from the origin
+    /// (`reach[a] = max(|lo_a − o_a|, |hi_a − o_a|)`, computed in f32).
     ///
-    /// The scene's bound is at least every lane's (`bound` is monotone: every operation on
-    /// non-negative values rounds monotonically), because its `S` and `Z` are at least any
-    /// triangle's: a vertex's computed `|x̂| ≤ (|p_kx − o_kx| + |ŝ|·|p_kz − o_kz|)·(1 + 2^-24)^3`
-    /// plus underflow, and `|p_a − o_a| ≤ reach[a]` up to one rounding.
+    /// The scene's bound is at least every lane's, because every step rounds monotonically: a
+    /// vertex `p` in `[lo, hi]` has `fl(p_a − o_a)` between `fl(lo_a − o_a)` and `fl(hi_a − o_a)`,
+    /// so `|ẑ| ≤ reach[kz]`; then `|fl(ŝ·ẑ)| ≤ fl(|ŝ|·reach[kz])` and
+    /// `|x̂| ≤ fl(reach[kx] + fl(|ŝ|·reach[kz]))`, the operations below (underflow included: a
+    /// rounding to a subnormal is monotone too); and `bound` is monotone in `S` and `Z`. The slack
+    /// on top is insurance, not part of the argument.
     #[inline(always)]
     pub(crate) fn new<const KZ: usize, const SWAP: bool>(
         org: Vec3,

@@ -11,8 +11,9 @@ pub(crate) trait Lanes: Copy {
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
-    /// The larger of each pair (where an input is NaN the filter rejects the lane whatever this
-    /// gives: no real triangle's values are NaN).
+    /// The larger of each pair. NaN handling differs between implementations (SSE2 and the plain
+    /// version return `o`, NEON returns NaN); the filter meets NaN only in unused lanes, NaN
+    /// throughout, which every version rejects (real triangles give no NaN below 2^60).
     fn max(self, o: Self) -> Self;
     /// The smaller of each pair (NaN as for `max`).
     fn min(self, o: Self) -> Self;

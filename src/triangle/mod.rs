@@ -199,7 +199,7 @@ impl PreparedRay {
     }
 
     /// [`PreparedRay::new`] with the filter allowed for the non-degenerate triangles inside `scene`
-    /// (see `for_scene`; degenerate ones the exact test always misses), always inline: the queries'
+    /// (see `for_scene`; no structure holds the degenerate ones), always inline: the queries'
     /// one entry
     /// ([`crate::accel::run_query`]) then builds the ray once, in place, instead of returning it
     /// through memory and copying it.

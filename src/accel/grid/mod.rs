@@ -218,6 +218,7 @@ impl UniformGrid {
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
         run_query(
             mesh,
+            self.shape.bounds,
             ray,
             None,
             Walk::<true, false> {
@@ -319,7 +320,7 @@ impl AcceptingQuery for UniformGrid {
             mesh,
             work,
         };
-        run_query(mesh, ray, accept, walk)
+        run_query(mesh, self.shape.bounds, ray, accept, walk)
     }
 
     #[inline(never)]
@@ -330,6 +331,6 @@ impl AcceptingQuery for UniformGrid {
             mesh,
             work,
         };
-        run_query(mesh, ray, accept, walk).is_hit()
+        run_query(mesh, self.shape.bounds, ray, accept, walk).is_hit()
     }
 }

@@ -294,6 +294,7 @@ impl KdTree {
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
         run_query(
             mesh,
+            self.bounds,
             ray,
             None,
             Walk::<true, false> {
@@ -329,7 +330,7 @@ impl AcceptingQuery for KdTree {
             mesh,
             work,
         };
-        run_query(mesh, ray, accept, walk)
+        run_query(mesh, self.bounds, ray, accept, walk)
     }
 
     #[inline(never)]
@@ -340,6 +341,6 @@ impl AcceptingQuery for KdTree {
             mesh,
             work,
         };
-        run_query(mesh, ray, accept, walk).is_hit()
+        run_query(mesh, self.bounds, ray, accept, walk).is_hit()
     }
 }
