@@ -386,17 +386,6 @@ impl TriMesh {
         self.bounds
     }
 
-    /// The largest coordinate magnitude of the non-degenerate triangles (`+∞` when there are none):
-    /// what structures pass to the triangle test's per-ray bound.
-    #[inline]
-    pub fn coordinate_bound(&self) -> f32 {
-        self.bounds
-            .min
-            .abs()
-            .max(self.bounds.max.abs())
-            .max_element()
-    }
-
     /// Bytes this mesh holds.
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.tris)

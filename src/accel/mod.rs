@@ -137,7 +137,8 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
     debug_assert!(packs.layout() == TriangleLayout::Indexed || start % 4 == 0);
     // Packed lists start on a block and their last block's other lanes are padding (NaN, rejected
     // by the filter; id INVALID or past the list, skipped when the filter is off): whole blocks,
-    // read in one pass with no per-block lookup.
+    // read in one pass with no per-block lookup. Otherwise (the indexed layout) each block is
+    // gathered from the mesh, with a mask for the lanes in the list.
     if let Some(blocks) = packs.blocks(start / 4, end.div_ceil(4)) {
         let id = |block: usize, lane: usize| {
             ids.get(start + 4 * block + lane)
@@ -148,18 +149,11 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
     }
     let mut base = start & !3;
     while base < end {
-        let gathered;
-        let (block, lanes) = match packs.block(base / 4) {
-            Some(b) => (b, 0b1111),
-            None => {
-                let lanes = lanes_in(start, end, base);
-                gathered = gather(mesh, ids, base, lanes);
-                (&gathered, lanes)
-            }
-        };
-        let survivors = test.survivors(block) & lanes;
+        let lanes = lanes_in(start, end, base);
+        let block = gather(mesh, ids, base, lanes);
+        let survivors = test.survivors(&block) & lanes;
         let id = |lane: usize| ids.get(base + lane).copied().unwrap_or(Hit::INVALID_ID);
-        if let Some(h) = test_lanes::<T, ANY>(test, block, survivors, id, best, mailbox) {
+        if let Some(h) = test_lanes::<T, ANY>(test, &block, survivors, id, best, mailbox) {
             return Some(h);
         }
         base += 4;

@@ -198,11 +198,9 @@ impl PreparedRay {
         Self::prepare(ray, &everywhere)
     }
 
-    /// [`PreparedRay::new`] with the filter allowed for the non-degenerate triangles inside `scene`
-    /// (see `for_scene`; no structure holds the degenerate ones), always inline: the queries'
-    /// one entry
-    /// ([`crate::accel::run_query`]) then builds the ray once, in place, instead of returning it
-    /// through memory and copying it.
+    /// [`PreparedRay::new`] with the filter allowed for triangles inside `scene` (see `for_scene`),
+    /// always inline: the queries' one entry ([`crate::accel::run_query`]) then builds the ray
+    /// once, in place, instead of returning it through memory and copying it.
     ///
     /// The direction is read in the rotated order `(d[kz], d[kz+1], d[kz+2])` chosen once, not
     /// indexed by run-time axes for each constant (which compiled to a chain of selects per read).

@@ -64,12 +64,6 @@ impl TrianglePacks {
         self.blocks.get(first..end)
     }
 
-    /// Block `i`, or `None` when there are no packs (indexed layout) or no such block.
-    #[inline(always)]
-    pub fn block(&self, i: usize) -> Option<&Block4> {
-        self.blocks.get(i)
-    }
-
     /// The layout these packs serve.
     pub fn layout(&self) -> TriangleLayout {
         if self.blocks.is_empty() {

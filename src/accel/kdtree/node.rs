@@ -86,12 +86,6 @@ impl KdNode {
         self.b
     }
 
-    /// Whether an interior node's lower (bit 0) and upper (bit 1) children are empty leaves.
-    #[inline(always)]
-    pub fn empty_children(self) -> u32 {
-        (self.b >> 2) & 3
-    }
-
     /// The triangle count of a leaf.
     #[inline(always)]
     pub fn count(self) -> u32 {
@@ -114,11 +108,23 @@ mod tests {
         let n = KdNode::interior(2, -3.5, MAX_CHILD_INDEX, (false, true));
         assert!(!n.is_leaf());
         assert_eq!(
-            (n.axis(), n.split(), n.children(), n.empty_children()),
-            (2, -3.5, MAX_CHILD_INDEX, 2)
+            (
+                n.axis(),
+                n.split(),
+                n.children(),
+                n.bits() & (EMPTY_BELOW | EMPTY_ABOVE)
+            ),
+            (2, -3.5, MAX_CHILD_INDEX, EMPTY_ABOVE)
         );
         let m = KdNode::interior(0, 1.0, 7, (true, false));
-        assert_eq!((m.children(), m.empty_children(), m.axis()), (7, 1, 0));
+        assert_eq!(
+            (
+                m.children(),
+                m.bits() & (EMPTY_BELOW | EMPTY_ABOVE),
+                m.axis()
+            ),
+            (7, EMPTY_BELOW, 0)
+        );
         let l = KdNode::leaf(MAX_NODE_FIELD, 77);
         assert!(l.is_leaf());
         assert_eq!((l.count(), l.offset()), (MAX_NODE_FIELD, 77));
