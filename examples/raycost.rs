@@ -5,6 +5,7 @@
 //!     cargo build --release --example raycost
 //!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7
 //!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
+//!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
 //!
@@ -50,6 +51,13 @@ fn grid_trace(grid: &UniformGrid, mesh: &TriMesh, rays: &[Ray]) -> u32 {
     })
 }
 
+#[inline(never)]
+fn grid_build(data: &MeshData) -> (TriMesh, UniformGrid) {
+    let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    (mesh, grid)
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -61,7 +69,7 @@ fn main() {
         args.first(),
         args.get(1).and_then(|r| r.parse::<usize>().ok()),
     ) else {
-        eprintln!("usage: raycost kd|grid|time|stats REPEATS SCENE...");
+        eprintln!("usage: raycost kd|grid|time|stats|build REPEATS SCENE...");
         std::process::exit(2);
     };
     let reps = reps.max(1);
@@ -70,6 +78,39 @@ fn main() {
             eprintln!("{name}: no such scene");
             std::process::exit(2);
         };
+        if mode == "build" || mode == "gridbuild" {
+            let mut times = (Vec::new(), Vec::new());
+            let mut refs = (0, 0, 0);
+            for _ in 0..reps {
+                let t = Instant::now();
+                let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0));
+                times.0.push(t.elapsed().as_secs_f64());
+                drop(std::hint::black_box(mesh));
+                let t = Instant::now();
+                let built = grid_build(&data);
+                times.1.push(t.elapsed().as_secs_f64());
+                refs = (
+                    built.1.reference_count(),
+                    built.1.cell_count(),
+                    built.1.memory_bytes(),
+                );
+                drop(std::hint::black_box(built));
+            }
+            let n = data.triangle_count() as f64;
+            let (mesh, total) = (median(times.0), median(times.1));
+            println!(
+                "{name:>16} N {n:>8} mesh {:6.2} ms grid total {:6.2} ms = {:5.1} Mtri/s ({:5.1} ns/tri, mesh {:4.1}) refs/tri {:.2} cells {} bytes/tri {:.0}",
+                mesh * 1e3,
+                total * 1e3,
+                n / total * 1e-6,
+                total * 1e9 / n,
+                mesh * 1e9 / n,
+                refs.0 as f64 / n,
+                refs.1,
+                refs.2 as f64 / n
+            );
+            continue;
+        }
         let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
         let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
         let grid =
@@ -126,7 +167,7 @@ fn main() {
                 );
             }
             _ => {
-                eprintln!("unknown mode {mode}: kd, grid, time or stats");
+                eprintln!("unknown mode {mode}: kd, grid, time, stats or build");
                 std::process::exit(2);
             }
         }

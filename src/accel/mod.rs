@@ -236,15 +236,15 @@ fn test_lanes<T: TriangleTest, const ANY: bool>(
 /// Out of line: one copy serves every walk, and its call costs little beside the gather itself.
 #[inline(never)]
 fn gather(mesh: &TriMesh, ids: &[u32], base: usize, lanes: u32) -> Block4 {
-    let mut block = Block4::default();
-    for lane in 0..4 {
+    let ids = core::array::from_fn(|lane| {
+        let named = ids.get(base + lane).copied().unwrap_or(Hit::INVALID_ID);
         if lanes & (1 << lane) != 0 {
-            if let Some(tri) = ids.get(base + lane).and_then(|&p| mesh.triangle(p)) {
-                block.set(lane, tri);
-            }
+            named
+        } else {
+            Hit::INVALID_ID
         }
-    }
-    block
+    });
+    Block4::gather(mesh.triangles(), ids)
 }
 
 #[cfg(test)]

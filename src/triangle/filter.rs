@@ -20,7 +20,7 @@
 //! gives a NaN, so a lane whose edge function is NaN is an unused one (NaN coordinates, the padding
 //! of block-aligned lists) and is rejected too.
 
-use glam::Vec3;
+use glam::{Mat4, Vec3, Vec4};
 
 use super::lanes::Lanes;
 
@@ -53,6 +53,34 @@ impl Block4 {
                     *slot = x;
                 }
             }
+        }
+    }
+
+    /// The block of the triangles `tris[ids[lane]]`; a lane whose id is out of range (such as
+    /// `Hit::INVALID_ID`) is unused (NaN).
+    #[inline(always)]
+    pub fn gather(tris: &[[Vec3; 3]], ids: [u32; 4]) -> Block4 {
+        const UNUSED: [Vec3; 3] = [Vec3::NAN; 3];
+        let t = ids.map(|id| tris.get(id as usize).unwrap_or(&UNUSED));
+        // Each triangle's first eight coordinates as two rows of four (adjacent floats, so two
+        // loads), turned into lanes by a 4×4 transposition each.
+        let row = |t: &[Vec3; 3], half: usize| match half {
+            0 => Vec4::new(t[0].x, t[0].y, t[0].z, t[1].x),
+            _ => Vec4::new(t[1].y, t[1].z, t[2].x, t[2].y),
+        };
+        let quad = |half: usize| {
+            Mat4::from_cols(
+                row(t[0], half),
+                row(t[1], half),
+                row(t[2], half),
+                row(t[3], half),
+            )
+            .transpose()
+            .to_cols_array_2d()
+        };
+        let ([v0, v1, v2, v3], [v4, v5, v6, v7]) = (quad(0), quad(1));
+        Block4 {
+            v: [v0, v1, v2, v3, v4, v5, v6, v7, t.map(|t| t[2].z)],
         }
     }
 

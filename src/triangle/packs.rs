@@ -7,6 +7,7 @@ use super::Block4;
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
+use crate::ray::Hit;
 
 /// How a structure holds the triangles its cells or leaves reference.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -44,13 +45,8 @@ impl TrianglePacks {
         }
         let mut blocks = budget.vec::<Block4>(refs.len().div_ceil(4), "triangle packs")?;
         for chunk in refs.chunks(4) {
-            let mut block = Block4::default();
-            for (lane, &prim) in chunk.iter().enumerate() {
-                if let Some(tri) = mesh.triangle(prim) {
-                    block.set(lane, tri);
-                }
-            }
-            blocks.push(block);
+            let ids = core::array::from_fn(|lane| chunk.get(lane).map_or(Hit::INVALID_ID, |&p| p));
+            blocks.push(Block4::gather(mesh.triangles(), ids));
         }
         Ok(TrianglePacks { blocks })
     }

@@ -1,6 +1,7 @@
 //! The triangle test against its definition: the exact integer answer, on random and adversarial
 //! ray/triangle pairs; the four-wide filter never rejects a hit; the list test equals the scalar one.
 
+use alloc::vec::Vec;
 use glam::Vec3;
 
 use super::exact::ExactTriangle;
@@ -357,4 +358,36 @@ fn portable_lanes_do_what_the_vector_lanes_do() {
     assert_eq!(F4::bits(F4::and(vn.nle(v0), vn.nge(v0))), 0b1111);
     assert_eq!(Portable::bits(Portable::and(p0.nle(p0), p0.nge(p0))), 0);
     assert_eq!(F4::bits(F4::and(v0.nle(v0), v0.nge(v0))), 0);
+}
+
+/// A gathered block holds, lane by lane, what `set` puts there, and NaN where the id names no
+/// triangle.
+#[test]
+fn a_gathered_block_matches_one_set_lane_by_lane() {
+    let mut rng = SplitMix64::new(0x6a);
+    let tris: Vec<[Vec3; 3]> = (0..16)
+        .map(|_| [point(&mut rng), point(&mut rng), point(&mut rng)])
+        .collect();
+    for ids in [
+        [0, 5, 15, 3],
+        [7, u32::MAX, 16, 2],
+        [u32::MAX; 4],
+        [9, 9, 9, 9],
+    ] {
+        let mut want = Block4::default();
+        for (lane, &id) in ids.iter().enumerate() {
+            if let Some(tri) = tris.get(id as usize) {
+                want.set(lane, tri);
+            }
+        }
+        let got = Block4::gather(&tris, ids);
+        for (k, (g, w)) in got.v.iter().zip(&want.v).enumerate() {
+            for lane in 0..4 {
+                assert!(
+                    g[lane] == w[lane] || (g[lane].is_nan() && w[lane].is_nan()),
+                    "coordinate {k} lane {lane} of {ids:?}"
+                );
+            }
+        }
+    }
 }
