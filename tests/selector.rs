@@ -507,23 +507,25 @@ fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
 }
 
 /// Issue 14's interior case: an ambient-occlusion renderer with the camera inside the cathedral
-/// (sibenik, in `../shared/scenes`), `expected_rays` set to its 1.54 M rays (640 × 480 primary
-/// rays and 4 occlusion rays per hit), the library's own sample rays. The kd-tree is 1.3× faster
-/// per ray there (docs/evaluation.md, "Interior camera"); format 2's model priced every hitting
-/// ray alike and kept the grid. The decision is deterministic (counted work, the built-in
-/// calibration), so this checks it exactly.
+/// (sibenik, in `../shared/scenes`), `expected_rays` set to its 1.53 M rays (640 × 480 primary rays
+/// and 4 occlusion rays per hit), the library's own sample rays. Since the grid steps over empty
+/// blocks (stop 22) it is within 10 % of the kd-tree per ray there, and at this budget the grid is
+/// the better fixed choice (564 ms against the kd-tree's 580, build included; docs/evaluation.md,
+/// "Interior camera"), so the decision from the default samples must be the grid (below the
+/// break-even). It is deterministic (counted work, the built-in calibration), so this checks it
+/// exactly. (Until stop 21 the kd-tree was 1.3× faster per ray and this asked for the kd-tree.)
 #[test]
-fn an_interior_occlusion_workload_gets_the_kd_tree_from_default_samples() {
+fn an_interior_occlusion_workload_gets_the_better_structure_from_default_samples() {
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/scenes/sibenik.obj");
     let Ok(data) = rayq::obj::load_obj(std::path::Path::new(path)) else {
         eprintln!("{path} not found: skipped (the project's checks run with ../shared beside it)");
         return;
     };
-    let scene = Scene::build(&data.as_source(), &auto(1_540_000), Calibration::builtin()).unwrap();
+    let scene = Scene::build(&data.as_source(), &auto(1_533_784), Calibration::builtin()).unwrap();
     let r = scene.report();
     assert_eq!(
         (r.structure, r.outcome),
-        (Structure::KdTree, Outcome::AboveBreakEven),
+        (Structure::Grid, Outcome::BelowBreakEven),
         "W* {}",
         r.break_even_rays
     );

@@ -4,6 +4,7 @@
 //!     cargo run --release --example evaluate                 # full scene set (~10 minutes)
 //!     cargo run --release --example evaluate -- --quick      # bundled scenes and small procedural ones
 //!     cargo run --release --example evaluate --features peers    # + Embree 3, obvhs, bvh in the same run
+//!     cargo run --release --example evaluate -- --interior   # only the interior-camera case, printed
 //!
 //! For every scene: both structures are built and the path-tracer-like workload (camera rays plus
 //! one diffuse bounce per hit) is traced through each, repeated, medians kept and the spread
@@ -25,7 +26,10 @@ use std::path::PathBuf;
 
 use rayq::mesh::MeshData;
 use rayq::select::calibration::BUILTIN_VARIANT;
-use rayq::select::decision::{kd_tree_confirmed, kd_tree_work_limit, CostEstimate, TRIAL_SHARE};
+use rayq::select::decision::{
+    kd_tree_confirmed, kd_tree_confirmed_at, kd_tree_work_limit, CostEstimate,
+    KD_NODE_PER_CELL_STEP, KD_TEST_PER_GRID_TEST, TRIAL_SHARE,
+};
 use rayq::select::fit::Observation;
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
@@ -61,9 +65,14 @@ fn parse() -> Args {
     while let Some(arg) = it.next() {
         match arg.as_str() {
             "--quick" => a.quick = true,
+            "--interior" => {
+                // Issue 14's interior case alone, printed (docs/evaluation.md has it in full).
+                print!("{}", interior::section(5).unwrap_or_default());
+                std::process::exit(0);
+            }
             "--out" => a.out = it.next().map(PathBuf::from).unwrap_or(a.out),
             _ => {
-                eprintln!("usage: evaluate [--quick] [--out DIR]");
+                eprintln!("usage: evaluate [--quick] [--out DIR] | --interior");
                 std::process::exit(2);
             }
         }
@@ -495,6 +504,109 @@ fn with_side(results: &[Measured], k: usize) -> Vec<Observation> {
         .collect()
 }
 
+/// The check after a kd-tree build (`kd_tree_confirmed`) against the measured per-ray times: how
+/// often it keeps the faster structure with the library's prices, and which prices would do best
+/// (in-sample, and leave-one-out so that the fit's optimism shows).
+fn check_section(md: &mut String, results: &[Measured]) {
+    // The library's default sample rays.
+    let default_side = SampleParams::DEFAULT.camera_side;
+    let k = SAMPLE_SIDES
+        .iter()
+        .position(|&s| s == default_side)
+        .unwrap_or(SAMPLE_SIDES.len() - 1);
+    let calibration = rayq::Calibration::builtin();
+    // What a wrong verdict costs on scene `m`: the slower structure's extra time per ray.
+    let loss = |m: &Measured, node: f64, test: f64| {
+        let keeps_kd =
+            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, node, test);
+        let (g, kd) = (m.obs.grid_ray_ns, m.obs.kd_ray_ns);
+        let kept = if keeps_kd { kd } else { g };
+        kept / g.min(kd) - 1.0
+    };
+    let nodes = [
+        0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1.0,
+    ];
+    let tests = [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0];
+    let score = |skip: Option<usize>, node: f64, test: f64| -> f64 {
+        results
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| Some(i) != skip)
+            .map(|(_, m)| loss(m, node, test))
+            .sum()
+    };
+    let best = |skip: Option<usize>| {
+        let mut b = (f64::INFINITY, 0.0, 0.0);
+        for &node in &nodes {
+            for &test in &tests {
+                let s = score(skip, node, test);
+                if s < b.0 {
+                    b = (s, node, test);
+                }
+            }
+        }
+        b
+    };
+    let right = |node: f64, test: f64| {
+        results
+            .iter()
+            .filter(|m| loss(m, node, test) == 0.0)
+            .count()
+    };
+    let (lib_node, lib_test) = (KD_NODE_PER_CELL_STEP, KD_TEST_PER_GRID_TEST);
+    let (_, fit_node, fit_test) = best(None);
+    let loo: Vec<f64> = (0..results.len())
+        .map(|i| {
+            let (_, node, test) = best(Some(i));
+            loss(&results[i], node, test)
+        })
+        .collect();
+    let worst = |node: f64, test: f64| {
+        results
+            .iter()
+            .map(|m| (loss(m, node, test), m.name.as_str()))
+            .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a })
+    };
+    let _ = writeln!(
+        md,
+        "\n### The check after a kd-tree build\n\nThe kd-tree is kept only if its counted work on \
+         the sample rays (a node priced at a share of a grid cell step, a test at a multiple of a grid \
+         test) is below the grid's (`kd_tree_confirmed`). Against the measured per-ray times of the \
+         workload, on the {} scenes (the library's default sample rays); *loss*: the kept \
+         structure's time per ray over the faster one's, summed over the scenes; prices searched \
+         over a grid of {} × {}:\n",
+        results.len(),
+        nodes.len(),
+        tests.len()
+    );
+    let _ = writeln!(
+        md,
+        "| prices (node, test) | keeps the faster | loss | worst |\n|---|---:|---:|---|"
+    );
+    for (label, node, test) in [
+        ("the library's", lib_node, lib_test),
+        ("best in-sample", fit_node, fit_test),
+    ] {
+        let w = worst(node, test);
+        let _ = writeln!(
+            md,
+            "| {label}: {node}, {test} | {} of {} | {:.3} | {} {:.1} % |",
+            right(node, test),
+            results.len(),
+            score(None, node, test),
+            w.1,
+            100.0 * w.0
+        );
+    }
+    let loo_right = loo.iter().filter(|&&l| l == 0.0).count();
+    let _ = writeln!(
+        md,
+        "| leave-one-out (each scene judged by the prices best on the others) | {loo_right} of {} | {:.3} | |",
+        results.len(),
+        loo.iter().sum::<f64>()
+    );
+}
+
 fn analyse(results: &[Measured], args: &Args) -> String {
     let obs: Vec<Observation> = results.iter().map(|m| m.obs).collect();
     // The variant the built-in calibration was fitted with (the variants table below compares
@@ -715,6 +827,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             geomean(&q)
         );
     }
+
+    check_section(&mut md, results);
 
     // Charts.
     let _ = writeln!(md, "\n## Charts\n");

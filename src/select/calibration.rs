@@ -118,35 +118,34 @@ pub const BUILTIN_VARIANT: &str = "all terms";
 
 /// The calibration compiled into the library: fitted by `cargo run --release --example calibrate
 /// -- --variant "all terms"` (its defaults: the bundled scenes plus the procedural set, 23 scenes)
-/// on the project's 2-core x86-64 VM (an AMD EPYC since stop 19), refitted at stop 21 after the
-/// list test's filter got cheaper (its first check against the scene's bound: a grid test now
-/// costs 1.62 ns, 3.22 at stop 20) and the kd-tree's step leaner (format 3: the kd-tree's build
-/// priced on the grid's references per triangle, its per-ray cost on the grid's counts);
-/// `calib/default.rqcal` holds the same values as a blob (a test keeps the two identical), with the
-/// kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT` since stop 20). The build
-/// keeps one term, 19.8 ns per N·log2 N per grid reference per triangle (the plain N·log2 N one
-/// comes out negative; at stop 20, on the same kind of measurements, this term lowered the build's
-/// leave-one-out error from a median 25.8 % (max 227 %) to 25.5 % (max 192 %), and on the
-/// long-triangle scenes from 34–92 % to 13–30 %). The kd-tree per ray is 115.9 ns plus 1.26 per
-/// grid cell and 2.69 per grid test (at stop 20 the cell term was dropped: 127.5 + 3.17 per test);
-/// it follows the rays (a camera inside a building makes both structures' estimates grow), where
-/// format 2's hit-fraction model priced every hitting ray alike. The variant is named rather than
-/// the one with the lowest median W* error, because that median moves by ±10 % between runs on the
-/// same machine (docs/evaluation.md, "Model terms"). Prices for both cells and tests are kept,
-/// which the check after a kd-tree build (`decision::kd_tree_confirmed`) needs.
+/// on the project's 2-core x86-64 VM (an Intel Xeon at stop 22), refitted at stop 22 after the
+/// grid's walk learnt to step over empty blocks of cells (a counted "cell" is now a cell with
+/// triangles' block or a block step: bunny 5.7 a ray where it was 12.9; a cell 14.5 ns, a test
+/// 1.04 ns); `calib/default.rqcal` holds the same values as a blob (a test keeps the two identical),
+/// with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT` since stop 20).
+/// The build keeps one term, 16.0 ns per N·log2 N per grid reference per triangle (the plain
+/// N·log2 N one comes out negative; at stop 20 this term lowered the build's leave-one-out error
+/// from a median 25.8 % to 25.5 %, and on the long-triangle scenes from 34–92 % to 13–30 %). The
+/// kd-tree per ray is 101.9 ns plus 4.35 per grid cell and 1.68 per grid test; it follows the rays
+/// (a camera inside a building makes both structures' estimates grow). With the walk's skipping the
+/// grid is faster per ray than the kd-tree on 10 of these 23 scenes and within 5 % on 7, so W*'s
+/// leave-one-out error is dominated by scenes whose W* is infinite on one side (docs/evaluation.md);
+/// the variant is named rather than the one with the lowest median W* error, because that median
+/// moves by ±10 % between runs on the same machine. Prices for both cells and tests are kept, which
+/// the check after a kd-tree build (`decision::kd_tree_confirmed`) needs.
 pub const BUILTIN: Calibration = Calibration {
     machine: 0,
     build: 0,
     values: [
-        67.33044433594097,
-        99.83496552186902,
-        16.42003770183889,
-        1.6223913411737172,
+        46.68076004776948,
+        95.93076073137922,
+        14.471140186469889,
+        1.0374426386141868,
         0.0,
-        19.75753043044897,
-        115.93805050261503,
-        1.2605444413237072,
-        2.69253008248525,
+        15.994702058408938,
+        101.93097756898881,
+        4.354822940077311,
+        1.6778001239137672,
     ],
 };
 

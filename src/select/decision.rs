@@ -179,10 +179,28 @@ pub fn kd_tree_confirmed(
     grid: &SceneFeatures,
     kd: &SceneFeatures,
 ) -> bool {
+    kd_tree_confirmed_at(
+        calibration,
+        grid,
+        kd,
+        KD_NODE_PER_CELL_STEP,
+        KD_TEST_PER_GRID_TEST,
+    )
+}
+
+/// [`kd_tree_confirmed`] with other prices for a node visit and a kd-tree test (relative to a cell
+/// step and a grid test), for the evaluation that fits them.
+pub fn kd_tree_confirmed_at(
+    calibration: &Calibration,
+    grid: &SceneFeatures,
+    kd: &SceneFeatures,
+    node_per_cell_step: f64,
+    test_per_grid_test: f64,
+) -> bool {
     let (cell, test) = (calibration.value(2), calibration.value(3));
     let grid_cost = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
-    let kd_cost = KD_NODE_PER_CELL_STEP * cell * kd.cells_per_ray()
-        + KD_TEST_PER_GRID_TEST * test * kd.tests_per_ray();
+    let kd_cost = node_per_cell_step * cell * kd.cells_per_ray()
+        + test_per_grid_test * test * kd.tests_per_ray();
     kd.rays == 0 || kd_cost < grid_cost
 }
 

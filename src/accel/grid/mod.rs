@@ -14,6 +14,7 @@ use crate::ray::{Hit, Ray};
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
 use crate::triangle::{Accept, Block4, TriangleTest};
 
+mod blocks;
 mod build;
 mod layout;
 #[cfg(test)]
@@ -21,6 +22,7 @@ mod tests;
 mod voxel;
 mod walk;
 
+use blocks::Blocks;
 use layout::Shape;
 use walk::Walk;
 
@@ -103,6 +105,8 @@ pub struct UniformGrid {
     lists: Lists,
     /// Triangle references over all cells (padding excluded).
     references: usize,
+    /// Which blocks of cells hold a triangle (empty-space skipping).
+    blocks: Blocks,
 }
 
 /// What one query did, for the selector's deterministic cost model.
@@ -147,18 +151,30 @@ impl UniformGrid {
                 offsets: Vec::new(),
                 lists,
                 references: 0,
+                blocks: Blocks::default(),
             });
         }
         let shape = Shape::new(tight, live, params.density)?;
         let (offsets, lists, references) = build::lists(mesh, &shape, params, budget)?;
         let size = shape.cell_size;
-        Ok(UniformGrid {
+        let mut grid = UniformGrid {
             shape,
             inv_cell64: [size.x, size.y, size.z].map(|s| 1.0 / f64::from(s)),
             offsets,
             lists,
             references,
-        })
+            blocks: Blocks::default(),
+        };
+        let offsets = &grid.offsets;
+        let occupied = |c: usize| offsets.get(c) != offsets.get(c + 1);
+        match Blocks::new(shape.res, occupied, budget) {
+            Ok(blocks) => grid.blocks = blocks,
+            Err(e) => {
+                grid.release(budget);
+                return Err(e);
+            }
+        }
+        Ok(grid)
     }
 
     /// Cells per axis (zero for an empty scene).
@@ -176,9 +192,10 @@ impl UniformGrid {
         self.references
     }
 
-    /// Bytes the grid holds (offsets, references and their triangle packs).
+    /// Bytes the grid holds (offsets, block bits, references and their triangle packs).
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.offsets)
+            + self.blocks.memory_bytes()
             + match &self.lists {
                 Lists::Packed { ids, tris } => bytes_of(ids) + bytes_of(tris),
                 Lists::Indexed { ids, packs } => bytes_of(ids) + packs.memory_bytes(),
@@ -202,6 +219,7 @@ impl UniformGrid {
     /// Gives the grid's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.offsets);
+        self.blocks.release(budget);
         match self.lists {
             Lists::Packed { ids, tris } => {
                 budget.free(ids);

@@ -205,3 +205,62 @@ fn tiny_directions_end_and_agree_with_brute_force() {
         }
     }
 }
+
+/// Stepping over empty blocks visits exactly the cells with triangles that the cell-by-cell walk
+/// visits: per ray, the same hit and the same number of triangles listed in the cells visited. The
+/// rays include diagonals from cell corners of a cubic grid, which cross planes of two or three
+/// axes at the same `t` (the walk's ties), and rays that start inside the grid.
+#[test]
+fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
+    let scenes = [
+        procedural::closed_sphere(5),
+        procedural::by_name("sphereflake", 10_000).unwrap(),
+        procedural::by_name("mount", 4_000).unwrap(),
+        procedural::by_name("stadium", 4_000).unwrap(),
+        procedural::by_name("hair", 2_000).unwrap(),
+    ];
+    let mut rng = crate::workload::SplitMix64::new(0xb10c);
+    let mut skipped_any = false;
+    for data in &scenes {
+        let mut budget = MemoryBudget::new(0);
+        let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+        let params = GridParams::FINE;
+        let grid = UniformGrid::build(&mesh, &params, &mut budget).unwrap();
+        let mut cells = UniformGrid::build(&mesh, &params, &mut budget).unwrap();
+        cells.blocks.occupy_all();
+        let (lo, size) = (grid.shape.bounds.min, grid.shape.cell_size);
+        let res = grid.resolution();
+        let mut rays = Vec::new();
+        for _ in 0..3000 {
+            // A cell corner (inside or on the faces of the grid) and a diagonal or random direction.
+            let corner = Vec3::new(
+                (rng.next_u64() % u64::from(res[0] + 1)) as f32,
+                (rng.next_u64() % u64::from(res[1] + 1)) as f32,
+                (rng.next_u64() % u64::from(res[2] + 1)) as f32,
+            );
+            let org = lo + corner * size;
+            let sign = |bit: u64| if bit & 1 == 0 { 1.0 } else { -1.0 };
+            let bits = rng.next_u64();
+            let diagonal = Vec3::new(sign(bits), sign(bits >> 1), sign(bits >> 2)) * size;
+            let random = Vec3::new(
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+                rng.next_f32() - 0.5,
+            );
+            rays.push(Ray::new(org, diagonal));
+            rays.push(Ray::new(org, random));
+            // From outside the box, through the corner.
+            rays.push(Ray::new(org - 3.0 * random * size * res[0] as f32, random));
+        }
+        for ray in &rays {
+            let (mut with, mut without) = (GridWork::default(), GridWork::default());
+            let a = grid.intersect_counted(&mesh, ray, &mut with);
+            let b = cells.intersect_counted(&mesh, ray, &mut without);
+            assert!(a.same_bits(&b), "{ray:?}: {a:?} against {b:?}");
+            assert_eq!(with.tests, without.tests, "{ray:?}");
+            skipped_any |= with.cells < without.cells;
+            agree(&mesh, &grid, ray);
+        }
+    }
+    assert!(skipped_any, "no ray stepped over an empty block");
+}

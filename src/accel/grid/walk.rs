@@ -4,6 +4,7 @@
 
 use glam::Vec3;
 
+use super::blocks::BLOCK;
 use super::{GridWork, UniformGrid};
 use crate::accel::brute::test_all;
 use crate::accel::Mailbox;
@@ -141,6 +142,11 @@ struct Axes {
     size: [f32; 4],
     org: [f32; 4],
     inv: [f32; 4],
+    /// The start cell's coordinates: no walk visits a cell before them on a moving axis, and a
+    /// non-moving axis keeps them.
+    start: [u32; 4],
+    /// The block index's change per step (as a wrapping add).
+    block_delta: [usize; 4],
 }
 
 impl Axes {
@@ -149,6 +155,135 @@ impl Axes {
     #[inline(always)]
     fn plane_t(&self, axis: usize, k: u32) -> f32 {
         (self.lo[axis] + k as f32 * self.size[axis] - self.org[axis]) * self.inv[axis]
+    }
+
+    /// Whether axis `a` moves (a non-moving one keeps `step = 0`).
+    #[inline(always)]
+    fn moves(&self, a: usize) -> bool {
+        self.step[a] != 0
+    }
+
+    /// Whether moving axis `a` moves up (towards the last cell).
+    #[inline(always)]
+    fn up(&self, a: usize) -> bool {
+        self.step[a] == 1
+    }
+
+    /// The current cell's coordinate on moving axis `a` (from the next plane's index).
+    #[inline(always)]
+    fn coordinate(&self, a: usize) -> u32 {
+        if self.up(a) {
+            self.k[a] - 1
+        } else {
+            self.k[a]
+        }
+    }
+
+    /// Steps over empty blocks, from the current cell (in an empty block) on, until the walk
+    /// enters a block that holds a triangle: then the axes and `index` are those of the cell the
+    /// cell-by-cell walk would be in at that crossing, `block` is its block, and the block steps
+    /// taken are returned. `None` when the walk ends first (a crossing at or past `t_stop`, or the
+    /// box's face): nothing in the rest of the window is listed.
+    ///
+    /// The block faces are cell planes, computed as the walk computes them, and taken in the
+    /// walk's order (the smallest `t`, ties to the lower axis), so the cells of the block entered
+    /// are found by counting, per axis, the planes inside it that the walk would have crossed
+    /// before that crossing. A walk never goes back past its start cell, so the count starts
+    /// there when it lies in the block.
+    #[inline(never)]
+    fn skip_empty(
+        &mut self,
+        grid: &UniformGrid,
+        block: &mut usize,
+        index: &mut usize,
+        t_stop: f32,
+    ) -> Option<u32> {
+        let (blocks, res) = (&grid.blocks, grid.shape.res);
+        // The next block face per axis, and its t (∞ on a non-moving axis, whose k is k_end).
+        let mut face = self.k_end;
+        let mut t = [f32::INFINITY; 4];
+        for a in 0..3 {
+            if self.moves(a) {
+                let c = self.coordinate(a) / BLOCK * BLOCK;
+                face[a] = if self.up(a) {
+                    (c + BLOCK).min(res[a])
+                } else {
+                    c
+                };
+                t[a] = if face[a] == self.k[a] {
+                    self.t_next[a]
+                } else {
+                    self.plane_t(a, face[a])
+                };
+            }
+        }
+        let mut steps = 0;
+        loop {
+            let (tx, ty, tz) = (t[0], t[1], t[2]);
+            let not_x = !((tx <= ty) & (tx <= tz));
+            let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
+            let t_axis = t[axis];
+            if t_axis >= t_stop || face[axis] == self.k_end[axis] {
+                return None;
+            }
+            steps += 1;
+            *block = block.wrapping_add(self.block_delta[axis]);
+            let crossed = face[axis];
+            face[axis] = if self.up(axis) {
+                (crossed + BLOCK).min(res[axis])
+            } else {
+                crossed - BLOCK
+            };
+            t[axis] = self.plane_t(axis, face[axis]);
+            debug_assert!(*block < blocks.res.iter().map(|&r| r as usize).product::<usize>());
+            if !blocks.occupied(*block) {
+                continue;
+            }
+            // The cell entered on `axis`, and on every other moving axis the cell after the last
+            // plane of the block crossed before (t, axis): earlier, or as early on a lower axis.
+            let (mut cell, mut stride) = (0usize, 1usize);
+            for a in 0..3 {
+                let c = if a == axis {
+                    if self.up(a) {
+                        crossed
+                    } else {
+                        crossed - 1
+                    }
+                } else if self.moves(a) {
+                    let before = |t: f32| t < t_axis || (t == t_axis && a < axis);
+                    let up = self.up(a);
+                    // The block's cells on this axis, from the face ahead.
+                    let (first, last) = if up {
+                        ((face[a] - 1) / BLOCK * BLOCK, face[a] - 1)
+                    } else {
+                        (face[a], (face[a] + BLOCK).min(res[a]) - 1)
+                    };
+                    if up {
+                        let mut c = first.max(self.start[a]);
+                        while c < last && before(self.plane_t(a, c + 1)) {
+                            c += 1;
+                        }
+                        c
+                    } else {
+                        let mut c = last.min(self.start[a]);
+                        while c > first && before(self.plane_t(a, c)) {
+                            c -= 1;
+                        }
+                        c
+                    }
+                } else {
+                    self.start[a]
+                };
+                if self.moves(a) {
+                    self.k[a] = if self.up(a) { c + 1 } else { c };
+                    self.t_next[a] = self.plane_t(a, self.k[a]);
+                }
+                cell += c as usize * stride;
+                stride *= res[a] as usize;
+            }
+            *index = cell;
+            return Some(steps);
+        }
     }
 }
 
@@ -180,9 +315,13 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             size: [0.0; 4],
             org: [0.0; 4],
             inv: [0.0; 4],
+            start: [0; 4],
+            block_delta: [0; 4],
         };
         let mut index = 0usize;
+        let mut block = 0usize;
         let mut stride = 1usize;
+        let mut block_stride = 1usize;
         for a in 0..3 {
             let res = shape.res[a];
             // The cell of the entry point, in f64 so that the index keeps its accuracy on grids of
@@ -193,9 +332,16 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             let f = (f64::from(p) - f64::from(shape.bounds.min[a])) * grid.inv_cell64[a];
             let cell = if f >= 0.0 { (f as u32).min(res - 1) } else { 0 };
             index += cell as usize * stride;
+            block += (cell / BLOCK) as usize * block_stride;
+            axes.start[a] = cell;
             let inv = line.inv[a];
             let up = line.dir[a] > 0.0;
             if inv.is_finite() {
+                axes.block_delta[a] = if up {
+                    block_stride
+                } else {
+                    block_stride.wrapping_neg()
+                };
                 axes.k[a] = cell + u32::from(up);
                 axes.k_end[a] = if up { res } else { 0 };
                 axes.step[a] = if up { 1 } else { u32::MAX };
@@ -207,6 +353,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 axes.t_next[a] = axes.plane_t(a, axes.k[a]);
             }
             stride *= res as usize;
+            block_stride *= grid.blocks.res[a] as usize;
         }
         // The walk ends at the first cell whose exit `t_axis` reaches `t_stop`: past the window
         // (`t_axis > t1`, i.e. `t_axis ≥ next_up(t1)`), or, with the early exit, at or past the
@@ -219,6 +366,16 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         } else {
             f32::INFINITY
         };
+        if !grid.blocks.occupied(block) {
+            match axes.skip_empty(grid, &mut block, &mut index, t_stop) {
+                Some(steps) => {
+                    if COUNT {
+                        work.cells += steps;
+                    }
+                }
+                None => return best,
+            }
+        }
         loop {
             // The axis whose boundary comes first (ties to the lower axis), without branches. A
             // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
@@ -248,10 +405,25 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
             // cell's far plane on that side and stops at the box's face.
             index = index.wrapping_add(axes.delta[axis]);
-            let k = axes.k[axis].wrapping_add(axes.step[axis]);
+            let crossed = axes.k[axis];
+            let k = crossed.wrapping_add(axes.step[axis]);
             axes.k[axis] = k;
             axes.t_next[axis] = axes.plane_t(axis, k);
             debug_assert!(index < grid.cell_count());
+            // A block's face: the next cell is in the neighbouring block, which may be empty.
+            if crossed & grid.blocks.faces == 0 {
+                block = block.wrapping_add(axes.block_delta[axis]);
+                if !grid.blocks.occupied(block) {
+                    match axes.skip_empty(grid, &mut block, &mut index, t_stop) {
+                        Some(steps) => {
+                            if COUNT {
+                                work.cells += steps;
+                            }
+                        }
+                        None => return best,
+                    }
+                }
+            }
         }
     }
 }
