@@ -6,6 +6,8 @@
 //!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7
 //!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
+//!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build
+//!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
 //!
@@ -58,6 +60,11 @@ fn grid_build(data: &MeshData) -> (TriMesh, UniformGrid) {
     (mesh, grid)
 }
 
+#[inline(never)]
+fn kd_build(mesh: &TriMesh) -> KdTree {
+    KdTree::build(mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap()
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -69,7 +76,7 @@ fn main() {
         args.first(),
         args.get(1).and_then(|r| r.parse::<usize>().ok()),
     ) else {
-        eprintln!("usage: raycost kd|grid|time|stats|build REPEATS SCENE...");
+        eprintln!("usage: raycost kd|grid|time|stats|build|cold|kdbuild REPEATS SCENE...");
         std::process::exit(2);
     };
     let reps = reps.max(1);
@@ -130,7 +137,22 @@ fn main() {
             continue;
         }
         let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
-        let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+        if mode == "kdbuild" {
+            let mut t = Vec::new();
+            for _ in 0..reps {
+                let t0 = Instant::now();
+                let tree = kd_build(&mesh);
+                t.push(t0.elapsed().as_secs_f64());
+                drop(std::hint::black_box(tree));
+            }
+            println!(
+                "{name:>16} N {:>8} kd build {:8.2} ms",
+                mesh.len(),
+                median(t) * 1e3
+            );
+            continue;
+        }
+        let tree = kd_build(&mesh);
         let grid =
             UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
         let mut rng = SplitMix64::new(7);
@@ -185,7 +207,7 @@ fn main() {
                 );
             }
             _ => {
-                eprintln!("unknown mode {mode}: kd, grid, time, stats or build");
+                eprintln!("unknown mode {mode}: kd, grid, time, stats, build, cold or kdbuild");
                 std::process::exit(2);
             }
         }
