@@ -5,6 +5,7 @@
 //!     cargo build --release --example raycost
 //!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7
 //!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
+//!     target/release/examples/raycost check 1 bunny               # the selector's check after a kd build
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
@@ -76,7 +77,7 @@ fn main() {
         args.first(),
         args.get(1).and_then(|r| r.parse::<usize>().ok()),
     ) else {
-        eprintln!("usage: raycost kd|grid|time|stats|build|cold|kdbuild REPEATS SCENE...");
+        eprintln!("usage: raycost kd|grid|time|stats|check|build|cold|kdbuild REPEATS SCENE...");
         std::process::exit(2);
     };
     let reps = reps.max(1);
@@ -189,6 +190,22 @@ fn main() {
                     median(gr) * 1e9 / n
                 );
             }
+            "check" => {
+                use rayq::select::decision::kd_tree_confirmed;
+                use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
+                let p = SampleParams::DEFAULT;
+                let g = sample_grid(&grid, &mesh, None, &p);
+                let k = sample_kdtree(&tree, &mesh, None, &p);
+                println!(
+                    "{name:>16} samples {} | grid cells {:.1} tests {:.1} | kd nodes {:.1} tests {:.1} | check keeps kd: {}",
+                    g.rays,
+                    g.cells_per_ray(),
+                    g.tests_per_ray(),
+                    k.cells_per_ray(),
+                    k.tests_per_ray(),
+                    kd_tree_confirmed(rayq::Calibration::builtin(), &g, &k)
+                );
+            }
             "stats" => {
                 let (mut kw, mut gw) = (KdWork::default(), GridWork::default());
                 for r in &rays {
@@ -207,7 +224,9 @@ fn main() {
                 );
             }
             _ => {
-                eprintln!("unknown mode {mode}: kd, grid, time, stats, build, cold or kdbuild");
+                eprintln!(
+                    "unknown mode {mode}: kd, grid, time, stats, check, build, cold or kdbuild"
+                );
                 std::process::exit(2);
             }
         }
