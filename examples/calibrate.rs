@@ -164,6 +164,8 @@ fn from_line(line: &str) -> Option<(String, Observation)> {
             cells: w.next()?.parse().ok()?,
             tests: w.next()?.parse().ok()?,
             grid_references: w.next()?.parse().ok()?,
+            // Not saved (the fit does not use it).
+            grid_largest_cell: 0,
         })
     };
     let workload = feat()?;

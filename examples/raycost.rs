@@ -213,14 +213,15 @@ fn main() {
                     grid.intersect_counted(&mesh, r, &mut gw);
                 }
                 println!(
-                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1}",
+                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1} (largest cell {})",
                     f64::from(kw.nodes) / n,
                     f64::from(kw.leaves) / n,
                     f64::from(kw.tests) / n,
                     tree.depth(),
                     tree.leaf_count(),
                     f64::from(gw.cells) / n,
-                    f64::from(gw.tests) / n
+                    f64::from(gw.tests) / n,
+                    grid.largest_cell()
                 );
             }
             _ => {

@@ -443,12 +443,14 @@ fn rays_from_the_centre(n: usize) -> Vec<rayq::Ray> {
 fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
     let data = cluster_in_a_shell();
     // The grid costs 1 µs per ray plus 1 ns per cell and per test, the kd-tree 1.1 µs, its build
-    // 1 ns per N log2 N: the kd-tree pays only where the grid tests far more than 100 triangles
-    // a ray.
-    let cal = calibration(1100.0, 1.0);
+    // 10 µs per N log2 N (1.2 s, so that no trial is built at once: a trial would meet the grid's
+    // heavy cell in the check and be kept): the kd-tree pays only where the grid tests far more
+    // than 100 triangles a ray.
+    let cal = calibration(1100.0, 10_000.0);
     let budget = 10_000_000;
     let mut scene = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
     let before = scene.report();
+
     assert_eq!(
         (before.structure, before.outcome),
         (Structure::Grid, Outcome::GridFasterPerRay),
@@ -526,6 +528,69 @@ fn an_interior_occlusion_workload_gets_the_better_structure_from_default_samples
     assert_eq!(
         (r.structure, r.outcome),
         (Structure::Grid, Outcome::BelowBreakEven),
+        "W* {}",
+        r.break_even_rays
+    );
+}
+
+/// The teapot in a stadium (a sphere of 15 000 triangles on a 1000 × 600 field): the grid, sized
+/// for the field, puts half the scene in one cell, so every ray that reaches the sphere tests
+/// ~10 000 triangles there, while the kd-tree tests a few dozen; the library's sample rays, a view
+/// of the whole field, hardly ever reach it, and their counts make the grid look the cheaper. The
+/// check after a kd-tree build must keep the kd-tree all the same (a heavy cell), so that a budget
+/// large enough to build it gets it.
+#[test]
+fn a_heavy_grid_cell_keeps_the_kd_tree_the_samples_would_drop() {
+    use rayq::accel::grid::GridWork;
+    use rayq::accel::kdtree::KdWork;
+    use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
+    use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, Ray, UniformGrid};
+    let data = rayq::procedural::by_name("stadium", 20_000).unwrap();
+    let mesh = mesh_of(&data);
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    // Rays down onto the sphere (centre (0, 0, 0.5), radius 0.5).
+    for k in 0..16 {
+        let x = -0.3 + 0.04 * k as f32;
+        let ray = Ray::new(
+            glam::Vec3::new(x, 0.1, 5.0),
+            glam::Vec3::new(0.0, 0.0, -1.0),
+        );
+        let (mut g, mut t) = (GridWork::default(), KdWork::default());
+        let hit = grid.intersect_counted(&mesh, &ray, &mut g);
+        assert!(hit.is_hit() && hit.same_bits(&tree.intersect_counted(&mesh, &ray, &mut t)));
+        assert!(
+            g.tests >= 5_000 && t.tests < 200,
+            "{ray:?}: grid {g:?}, kd-tree {t:?}"
+        );
+    }
+    // The samples' counts alone would drop the kd-tree.
+    let samples = SampleParams::DEFAULT;
+    let (g, k) = (
+        sample_grid(&grid, &mesh, None, &samples),
+        sample_kdtree(&tree, &mesh, None, &samples),
+    );
+    assert!(g.has_heavy_cell(), "largest cell {}", g.grid_largest_cell);
+    let plain = rayq::select::model::SceneFeatures {
+        grid_largest_cell: 0,
+        ..g
+    };
+    assert!(!rayq::select::decision::kd_tree_confirmed(
+        Calibration::builtin(),
+        &plain,
+        &k
+    ));
+    // AUTO with a budget that builds the kd-tree keeps it.
+    let scene = Scene::build(
+        &data.as_source(),
+        &auto(1_000_000_000),
+        Calibration::builtin(),
+    )
+    .unwrap();
+    let r = scene.report();
+    assert_eq!(
+        (r.structure, r.outcome),
+        (Structure::KdTree, Outcome::AboveBreakEven),
         "W* {}",
         r.break_even_rays
     );

@@ -266,6 +266,7 @@ mod tests {
             cells: (cells * rays as f64) as u64,
             tests: (tests * rays as f64) as u64,
             grid_references: (n as f64 * (1.5 + h)) as u64,
+            grid_largest_cell: 0,
         }
     }
 

@@ -94,6 +94,7 @@ pub fn sample_grid(
         (hit, work.cells, work.tests)
     });
     f.grid_references = grid.reference_count() as u64;
+    f.grid_largest_cell = grid.largest_cell() as u64;
     f
 }
 

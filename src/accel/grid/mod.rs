@@ -192,6 +192,21 @@ impl UniformGrid {
         self.references
     }
 
+    /// The most triangles listed in one cell (padding excluded for the indexed layout; the packed
+    /// layout counts its list's lanes, gap lanes included, so at most three more).
+    pub fn largest_cell(&self) -> usize {
+        let widest = self
+            .offsets
+            .windows(2)
+            .map(|w| (w[1] - w[0]) as usize)
+            .max()
+            .unwrap_or(0);
+        match self.lists {
+            Lists::Packed { .. } => 4 * widest,
+            Lists::Indexed { .. } => widest,
+        }
+    }
+
     /// Bytes the grid holds (offsets, block bits, references and their triangle packs).
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.offsets)
