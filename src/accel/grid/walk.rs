@@ -179,6 +179,23 @@ impl Axes {
         }
     }
 
+    /// Entering `block` (the current cell's): nothing to do when it holds a triangle (no block
+    /// steps), else [`Axes::skip_empty`].
+    #[inline(always)]
+    fn enter_block(
+        &mut self,
+        grid: &UniformGrid,
+        block: &mut usize,
+        index: &mut usize,
+        t_stop: f32,
+    ) -> Option<u32> {
+        if grid.blocks.occupied(*block) {
+            Some(0)
+        } else {
+            self.skip_empty(grid, block, index, t_stop)
+        }
+    }
+
     /// Steps over empty blocks, from the current cell (in an empty block) on, until the walk
     /// enters a block that holds a triangle: then the axes and `index` are those of the cell the
     /// cell-by-cell walk would be in at that crossing, `block` is its block, and the block steps
@@ -366,15 +383,11 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         } else {
             f32::INFINITY
         };
-        if !grid.blocks.occupied(block) {
-            match axes.skip_empty(grid, &mut block, &mut index, t_stop) {
-                Some(steps) => {
-                    if COUNT {
-                        work.cells += steps;
-                    }
-                }
-                None => return best,
-            }
+        let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
+            return best;
+        };
+        if COUNT {
+            work.cells += steps;
         }
         loop {
             // The axis whose boundary comes first (ties to the lower axis), without branches. A
@@ -413,15 +426,11 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             // A block's face: the next cell is in the neighbouring block, which may be empty.
             if crossed & grid.blocks.faces == 0 {
                 block = block.wrapping_add(axes.block_delta[axis]);
-                if !grid.blocks.occupied(block) {
-                    match axes.skip_empty(grid, &mut block, &mut index, t_stop) {
-                        Some(steps) => {
-                            if COUNT {
-                                work.cells += steps;
-                            }
-                        }
-                        None => return best,
-                    }
+                let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
+                    return best;
+                };
+                if COUNT {
+                    work.cells += steps;
                 }
             }
         }
