@@ -12,8 +12,8 @@ use crate::math;
 
 /// The fewest triangles in one grid cell that [`SceneFeatures::has_heavy_cell`] counts as heavy
 /// (with a sixteenth of the scene): a ray through such a cell costs as much as a few dozen ordinary
-/// rays. Over the evaluation's 31 scenes the largest cell holds 16–364 triangles on 24, 1 264–1 372
-/// on engine_2cyl and sibenik (1–2 % of their triangles), and 2 320–227 012 on munich and the three
+/// rays. Over the evaluation's 31 scenes the largest cell holds at most 364 triangles on 25, 1 264–1 370
+/// on engine_2cyl and sibenik (1–2 % of their triangles), and 2 318–227 012 on munich and the three
 /// stadiums (11–57 %).
 pub const HEAVY_CELL_MIN: u64 = 1024;
 

@@ -15,15 +15,25 @@ use crate::ray::Hit;
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
 use crate::triangle::Block4;
 
-/// The cell offsets and the lists of a grid of shape `shape` over `mesh`, and the number of
-/// references (padding excluded). Every allocation is charged to `budget`; on failure everything
-/// taken is given back.
+/// What [`lists`] builds.
+pub(super) struct Built {
+    /// The cells' offsets (`cells + 1` of them).
+    pub offsets: Vec<u32>,
+    pub lists: Lists,
+    /// References over all cells (padding excluded).
+    pub references: usize,
+    /// The most references one cell holds.
+    pub largest_cell: usize,
+}
+
+/// The cell offsets and the lists of a grid of shape `shape` over `mesh`, with its reference
+/// counts. Every allocation is charged to `budget`; on failure everything taken is given back.
 pub(super) fn lists(
     mesh: &TriMesh,
     shape: &Shape,
     params: &GridParams,
     budget: &mut MemoryBudget,
-) -> Result<(Vec<u32>, Lists, usize), BuildError> {
+) -> Result<Built, BuildError> {
     let cells = Cells::new(shape);
     let n_cells = shape.cells();
     let mut counts = budget.filled(n_cells + 1, 0u32, "grid cell offsets")?;
@@ -34,6 +44,7 @@ pub(super) fn lists(
             return Err(e);
         }
     };
+    let largest_cell = counts.iter().take(n_cells).max().map_or(0, |&n| n as usize);
     let packed = params.layout == TriangleLayout::Packed;
     let filled = offsets(&mut counts, n_cells, if packed { 4 } else { 1 })
         .and_then(|total| fill_lists(mesh, &kept, &mut counts, total, packed, budget));
@@ -47,7 +58,12 @@ pub(super) fn lists(
                     *c /= 4;
                 }
             }
-            Ok((counts, lists, references))
+            Ok(Built {
+                offsets: counts,
+                lists,
+                references,
+                largest_cell,
+            })
         }
         Err(e) => {
             budget.free(counts);

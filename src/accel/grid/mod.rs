@@ -105,6 +105,8 @@ pub struct UniformGrid {
     lists: Lists,
     /// Triangle references over all cells (padding excluded).
     references: usize,
+    /// The most triangles one cell lists.
+    largest_cell: usize,
     /// Which blocks of cells hold a triangle (empty-space skipping).
     blocks: Blocks,
 }
@@ -151,18 +153,20 @@ impl UniformGrid {
                 offsets: Vec::new(),
                 lists,
                 references: 0,
+                largest_cell: 0,
                 blocks: Blocks::default(),
             });
         }
         let shape = Shape::new(tight, live, params.density)?;
-        let (offsets, lists, references) = build::lists(mesh, &shape, params, budget)?;
+        let built = build::lists(mesh, &shape, params, budget)?;
         let size = shape.cell_size;
         let mut grid = UniformGrid {
             shape,
             inv_cell64: [size.x, size.y, size.z].map(|s| 1.0 / f64::from(s)),
-            offsets,
-            lists,
-            references,
+            offsets: built.offsets,
+            lists: built.lists,
+            references: built.references,
+            largest_cell: built.largest_cell,
             blocks: Blocks::default(),
         };
         let offsets = &grid.offsets;
@@ -192,19 +196,9 @@ impl UniformGrid {
         self.references
     }
 
-    /// The most triangles listed in one cell (padding excluded for the indexed layout; the packed
-    /// layout counts its list's lanes, gap lanes included, so at most three more).
+    /// The most triangles one cell lists (padding excluded), counted during the build.
     pub fn largest_cell(&self) -> usize {
-        let widest = self
-            .offsets
-            .windows(2)
-            .map(|w| (w[1] - w[0]) as usize)
-            .max()
-            .unwrap_or(0);
-        match self.lists {
-            Lists::Packed { .. } => 4 * widest,
-            Lists::Indexed { .. } => widest,
-        }
+        self.largest_cell
     }
 
     /// Bytes the grid holds (offsets, block bits, references and their triangle packs).

@@ -209,7 +209,8 @@ fn tiny_directions_end_and_agree_with_brute_force() {
 /// Stepping over empty blocks visits exactly the cells with triangles that the cell-by-cell walk
 /// visits: per ray, the same hit and the same number of triangles listed in the cells visited. The
 /// rays include diagonals from cell corners of a cubic grid, which cross planes of two or three
-/// axes at the same `t` (the walk's ties), and rays that start inside the grid.
+/// axes at the same `t` (the walk's ties), and rays that start inside the grid. (It also checks
+/// the build's count of the largest cell against the lists.)
 #[test]
 fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
     let scenes = [
@@ -261,6 +262,9 @@ fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
             skipped_any |= with.cells < without.cells;
             agree(&mesh, &grid, ray);
         }
+        // The largest cell counted in the build is the longest list, padding excluded.
+        let longest = (0..grid.cell_count()).map(|c| grid.listed(c)).max();
+        assert_eq!(grid.largest_cell() as u32, longest.unwrap_or(0));
     }
     assert!(skipped_any, "no ray stepped over an empty block");
 }
