@@ -213,7 +213,7 @@ fn main() {
                     grid.intersect_counted(&mesh, r, &mut gw);
                 }
                 println!(
-                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1} (largest cell {})",
+                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1} (largest cell {}, nested grids {})",
                     f64::from(kw.nodes) / n,
                     f64::from(kw.leaves) / n,
                     f64::from(kw.tests) / n,
@@ -221,7 +221,8 @@ fn main() {
                     tree.leaf_count(),
                     f64::from(gw.cells) / n,
                     f64::from(gw.tests) / n,
-                    grid.largest_cell()
+                    grid.largest_cell(),
+                    grid.nested_count()
                 );
             }
             _ => {

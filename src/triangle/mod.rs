@@ -110,6 +110,8 @@ pub(crate) trait TriangleTest: Copy {
     /// The lanes of `block` that [`TriangleTest::test`] might hit (bit `k` for lane `k`): every lane
     /// it would hit is set; most lanes it would miss are clear.
     fn survivors(&self, block: &Block4) -> u32;
+    /// The same test with its axes chosen at run time.
+    fn any_axes(&self) -> AnyKernel<'_>;
 }
 
 /// The test specialised for `kz` (the dominant axis of the direction) and `swap` (whether `kx` and
@@ -154,6 +156,79 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
             return 0b1111;
         }
         filter::survivors::<lanes::F4, KZ, SWAP>(&self.2, block)
+    }
+
+    // The filter's values are recomputed rather than copied, so that the walks' loops keep them
+    // in registers (a copy on a path out of the loop made the grid's loop keep them in memory).
+    #[inline(always)]
+    fn any_axes(&self) -> AnyKernel<'_> {
+        let ray = self.0;
+        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32, ray.reach);
+        AnyKernel(ray, self.1, lanes)
+    }
+}
+
+/// A [`Kernel`] whose axes are chosen per call from the ray's (a branch per call), for walks too
+/// rare to be worth a copy per kernel: one copy serves the six.
+#[derive(Clone, Copy)]
+pub(crate) struct AnyKernel<'a>(
+    &'a PreparedRay,
+    Option<&'a dyn Accept>,
+    filter::FilterRay<lanes::F4>,
+);
+
+/// `$body!(KZ, SWAP)` for the ray's axes: the one mapping from `PreparedRay::axes` to a kernel.
+macro_rules! with_axes {
+    ($ray:expr, $body:ident) => {
+        match $ray.axes {
+            0 => $body!(0, false),
+            1 => $body!(0, true),
+            2 => $body!(1, false),
+            3 => $body!(1, true),
+            4 => $body!(2, false),
+            _ => $body!(2, true),
+        }
+    };
+}
+
+impl TriangleTest for AnyKernel<'_> {
+    #[inline(always)]
+    fn ray(&self) -> &PreparedRay {
+        self.0
+    }
+
+    // The kernels' own out-of-line tests, not copies of them.
+    #[inline(never)]
+    fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
+        macro_rules! test {
+            ($kz:expr, $swap:expr) => {
+                Kernel::<$kz, $swap>(self.0, self.1, self.2).test(tri)
+            };
+        }
+        with_axes!(self.0, test)
+    }
+
+    #[inline(always)]
+    fn accept(&self, prim: u32, hit: &TriHit) -> bool {
+        self.1.map_or(true, |a| a.accept(prim, hit))
+    }
+
+    #[inline(never)]
+    fn survivors(&self, block: &Block4) -> u32 {
+        if !self.0.filter_ok {
+            return 0b1111;
+        }
+        macro_rules! survivors {
+            ($kz:expr, $swap:expr) => {
+                filter::survivors::<lanes::F4, $kz, $swap>(&self.2, block)
+            };
+        }
+        with_axes!(self.0, survivors)
+    }
+
+    #[inline(always)]
+    fn any_axes(&self) -> AnyKernel<'_> {
+        *self
     }
 }
 
@@ -286,14 +361,12 @@ impl PreparedRay {
         accept: Option<&dyn Accept>,
         lp: L,
     ) -> L::Output {
-        match self.axes {
-            0 => lp.run(Kernel::<0, false>::new(self, accept)),
-            1 => lp.run(Kernel::<0, true>::new(self, accept)),
-            2 => lp.run(Kernel::<1, false>::new(self, accept)),
-            3 => lp.run(Kernel::<1, true>::new(self, accept)),
-            4 => lp.run(Kernel::<2, false>::new(self, accept)),
-            _ => lp.run(Kernel::<2, true>::new(self, accept)),
+        macro_rules! run {
+            ($kz:expr, $swap:expr) => {
+                lp.run(Kernel::<$kz, $swap>::new(self, accept))
+            };
         }
+        with_axes!(self, run)
     }
 
     /// The exact test against triangle `(p0, p1, p2)`: `Some((t, u, v))` when the line meets the

@@ -26,10 +26,40 @@ pub(super) struct Built {
     pub largest_cell: usize,
 }
 
-/// The cell offsets and the lists of a grid of shape `shape` over `mesh`, with its reference
-/// counts. Every allocation is charged to `budget`; on failure everything taken is given back.
+/// The triangles a grid lists.
+#[derive(Clone, Copy)]
+pub(super) enum Members<'a> {
+    /// Every non-degenerate triangle of the mesh.
+    Mesh,
+    /// These (non-degenerate) triangles: a nested grid's cell list.
+    Listed(&'a [u32]),
+}
+
+impl Members<'_> {
+    /// How many triangles the build walks (degenerate ones of the mesh included).
+    fn len(&self, mesh: &TriMesh) -> usize {
+        match self {
+            Members::Mesh => mesh.len(),
+            Members::Listed(ids) => ids.len(),
+        }
+    }
+
+    /// The id of the `i`-th triangle walked.
+    #[inline(always)]
+    fn prim(&self, i: usize) -> usize {
+        match self {
+            Members::Mesh => i,
+            Members::Listed(ids) => ids.get(i).map_or(usize::MAX, |&p| p as usize),
+        }
+    }
+}
+
+/// The cell offsets and the lists of a grid of shape `shape` over `members` of `mesh`, with its
+/// reference counts. Every allocation is charged to `budget`; on failure everything taken is
+/// given back.
 pub(super) fn lists(
     mesh: &TriMesh,
+    members: Members<'_>,
     shape: &Shape,
     params: &GridParams,
     budget: &mut MemoryBudget,
@@ -37,7 +67,14 @@ pub(super) fn lists(
     let cells = Cells::new(shape);
     let n_cells = shape.cells();
     let mut counts = budget.filled(n_cells + 1, 0u32, "grid cell offsets")?;
-    let kept = match keep_cells(mesh, &cells, params.exact_overlap, &mut counts, budget) {
+    let kept = match keep_cells(
+        mesh,
+        members,
+        &cells,
+        params.exact_overlap,
+        &mut counts,
+        budget,
+    ) {
         Ok(k) => k,
         Err(e) => {
             budget.free(counts);
@@ -47,7 +84,7 @@ pub(super) fn lists(
     let largest_cell = counts.iter().take(n_cells).max().map_or(0, |&n| n as usize);
     let packed = params.layout == TriangleLayout::Packed;
     let filled = offsets(&mut counts, n_cells, if packed { 4 } else { 1 })
-        .and_then(|total| fill_lists(mesh, &kept, &mut counts, total, packed, budget));
+        .and_then(|total| fill_lists(mesh, members, &kept, &mut counts, total, packed, budget));
     let references = kept.cells.len();
     kept.release(budget);
     match filled {
@@ -72,7 +109,7 @@ pub(super) fn lists(
     }
 }
 
-/// Each live triangle's cells in triangle order, and how many each triangle has.
+/// Each member's cells in member order, and how many each member has.
 struct Kept {
     cells: Vec<u32>,
     per_triangle: Vec<u32>,
@@ -85,20 +122,22 @@ impl Kept {
     }
 }
 
-/// Finds each live triangle's cells once, counts them in `counts` (one slot per cell) and keeps
+/// Finds each live member's cells once, counts them in `counts` (one slot per cell) and keeps
 /// them for the fill.
 #[inline(never)]
 fn keep_cells(
     mesh: &TriMesh,
+    members: Members<'_>,
     cells: &Cells,
     exact: bool,
     counts: &mut [u32],
     budget: &mut MemoryBudget,
 ) -> Result<Kept, BuildError> {
     let tris = mesh.triangles();
-    let mut per_triangle = budget.filled(tris.len(), 0u32, "grid build scratch")?;
+    let n = members.len(mesh);
+    let mut per_triangle = budget.filled(n, 0u32, "grid build scratch")?;
     // About 2.5 references per triangle on well-shaped scenes; the vector doubles past that.
-    let guess = tris.len().saturating_mul(3).max(64);
+    let guess = n.saturating_mul(3).max(64);
     let mut kept = match budget.vec::<u32>(guess, "grid build scratch") {
         Ok(v) => v,
         Err(e) => {
@@ -108,13 +147,16 @@ fn keep_cells(
     };
     let mut failed = None;
     let degenerate = mesh.degenerate_bits();
-    for (prim, (tri, count)) in tris.iter().zip(per_triangle.iter_mut()).enumerate() {
-        if degenerate
-            .get(prim / 32)
-            .map_or(true, |w| w & (1 << (prim % 32)) != 0)
-        {
+    for (i, count) in per_triangle.iter_mut().enumerate() {
+        let prim = members.prim(i);
+        // A listed member is live (it was listed); the mesh's degenerate triangles are skipped.
+        let skip = matches!(members, Members::Mesh)
+            && degenerate
+                .get(prim / 32)
+                .map_or(true, |w| w & (1 << (prim % 32)) != 0);
+        let Some(tri) = tris.get(prim).filter(|_| !skip) else {
             continue;
-        }
+        };
         let before = kept.len();
         // Counts `cell` (a cell of the grid: each coordinate is clamped to `res − 1` by
         // `Cells`, and `counts` has one slot per cell and one more). A count cannot wrap: it
@@ -217,15 +259,16 @@ fn offsets(counts: &mut [u32], cells: usize, align: u64) -> Result<usize, BuildE
     Ok(total as usize)
 }
 
-/// Walks the kept cells backwards (last triangle first), writing each reference's id into its
+/// Walks the kept cells backwards (last member first), writing each reference's id into its
 /// slot of `ids` — the cell's end counted down, so lists come out sorted by id and `counts[c]`
 /// ends at the start of cell `c`'s list. Each cell is counted down exactly as many times as it was
 /// counted up, so every slot lies in `[start, end)` of its cell's list (no underflow, and below
 /// the total, the length of `ids`).
 #[inline(never)]
-fn scatter_ids(kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
+fn scatter_ids(members: Members<'_>, kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
     let mut end = kept.cells.len();
-    for (prim, &n) in kept.per_triangle.iter().enumerate().rev() {
+    for (i, &n) in kept.per_triangle.iter().enumerate().rev() {
+        let prim = members.prim(i);
         let start = end - n as usize;
         for &cell in kept.cells.get(start..end).unwrap_or(&[]).iter().rev() {
             debug_assert!((cell as usize) < counts.len());
@@ -250,6 +293,7 @@ fn scatter_ids(kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
 #[inline(never)]
 fn fill_lists(
     mesh: &TriMesh,
+    members: Members<'_>,
     kept: &Kept,
     counts: &mut [u32],
     total: usize,
@@ -258,7 +302,7 @@ fn fill_lists(
 ) -> Result<Lists, BuildError> {
     if !packed {
         let mut ids = budget.filled(total, Hit::INVALID_ID, "grid references")?;
-        scatter_ids(kept, counts, &mut ids);
+        scatter_ids(members, kept, counts, &mut ids);
         return Ok(Lists::Indexed {
             ids,
             packs: TrianglePacks::default(),
@@ -267,7 +311,7 @@ fn fill_lists(
     let blocks = total / 4;
     // Every lane starts unused, so the gap lanes at the end of each list need no pass of their own.
     let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
-    scatter_ids(kept, counts, ids.as_flattened_mut());
+    scatter_ids(members, kept, counts, ids.as_flattened_mut());
     let mut tris = match budget.vec::<Block4>(blocks, "triangle packs") {
         Ok(t) => t,
         Err(e) => {

@@ -17,13 +17,16 @@ use crate::triangle::{Accept, Block4, TriangleTest};
 mod blocks;
 mod build;
 mod layout;
+mod nested;
 #[cfg(test)]
 mod tests;
 mod voxel;
 mod walk;
 
 use blocks::Blocks;
+use build::Members;
 use layout::Shape;
+use nested::Nested;
 use walk::Walk;
 
 /// The grid's knobs.
@@ -105,10 +108,15 @@ pub struct UniformGrid {
     lists: Lists,
     /// Triangle references over all cells (padding excluded).
     references: usize,
-    /// The most triangles one cell lists.
+    /// The most triangles a walk tests in one cell (see [`UniformGrid::largest_cell`]).
     largest_cell: usize,
     /// Which blocks of cells hold a triangle (empty-space skipping).
     blocks: Blocks,
+    /// Grids over the heaviest cells' lists, sorted by cell (nested.rs).
+    nested: Vec<Nested>,
+    /// Lists at least this long (in the lists' units) may have a nested grid; `usize::MAX` when
+    /// none has.
+    nested_span: usize,
 }
 
 /// What one query did, for the selector's deterministic cost model.
@@ -155,10 +163,30 @@ impl UniformGrid {
                 references: 0,
                 largest_cell: 0,
                 blocks: Blocks::default(),
+                nested: Vec::new(),
+                nested_span: usize::MAX,
             });
         }
+        let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
+        if let Err(e) = nested::nest(&mut grid, mesh, params, budget, 0) {
+            grid.release(budget);
+            return Err(e);
+        }
+        Ok(grid)
+    }
+
+    /// A grid over `members` (`live` triangles, not zero) of `mesh`, in a box around `tight` (not
+    /// empty), without nested grids (nested.rs adds them).
+    fn build_over(
+        mesh: &TriMesh,
+        members: Members<'_>,
+        tight: Aabb,
+        live: usize,
+        params: &GridParams,
+        budget: &mut MemoryBudget,
+    ) -> Result<UniformGrid, BuildError> {
         let shape = Shape::new(tight, live, params.density)?;
-        let built = build::lists(mesh, &shape, params, budget)?;
+        let built = build::lists(mesh, members, &shape, params, budget)?;
         let size = shape.cell_size;
         let mut grid = UniformGrid {
             shape,
@@ -168,6 +196,8 @@ impl UniformGrid {
             references: built.references,
             largest_cell: built.largest_cell,
             blocks: Blocks::default(),
+            nested: Vec::new(),
+            nested_span: usize::MAX,
         };
         let offsets = &grid.offsets;
         let occupied = |c: usize| offsets.get(c) != offsets.get(c + 1);
@@ -191,20 +221,33 @@ impl UniformGrid {
         self.offsets.len().saturating_sub(1)
     }
 
-    /// Number of triangle references over all cells.
+    /// Number of triangle references over all cells, those of nested grids included.
     pub fn reference_count(&self) -> usize {
-        self.references
+        self.references + self.nested.iter().map(|n| n.grid.references).sum::<usize>()
     }
 
-    /// The most triangles one cell lists (padding excluded), counted during the build.
+    /// Number of cells with a nested grid of their own (docs/design.md, "Nested grids").
+    pub fn nested_count(&self) -> usize {
+        self.nested.len()
+    }
+
+    /// The most triangles a walk tests in one cell (padding excluded): the longest list of a cell
+    /// without a nested grid, here or in a nested grid (docs/design.md, "Nested grids").
     pub fn largest_cell(&self) -> usize {
         self.largest_cell
     }
 
-    /// Bytes the grid holds (offsets, block bits, references and their triangle packs).
+    /// Bytes the grid holds (offsets, block bits, references and their triangle packs, nested
+    /// grids).
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.offsets)
             + self.blocks.memory_bytes()
+            + bytes_of(&self.nested)
+            + self
+                .nested
+                .iter()
+                .map(|n| n.grid.memory_bytes())
+                .sum::<usize>()
             + match &self.lists {
                 Lists::Packed { ids, tris } => bytes_of(ids) + bytes_of(tris),
                 Lists::Indexed { ids, packs } => bytes_of(ids) + packs.memory_bytes(),
@@ -213,10 +256,15 @@ impl UniformGrid {
 
     /// Bytes of the triangle packs alone (zero for the indexed layout).
     pub fn pack_bytes(&self) -> usize {
-        match &self.lists {
+        let own = match &self.lists {
             Lists::Packed { tris, .. } => bytes_of(tris),
             Lists::Indexed { packs, .. } => packs.memory_bytes(),
-        }
+        };
+        own + self
+            .nested
+            .iter()
+            .map(|n| n.grid.pack_bytes())
+            .sum::<usize>()
     }
 
     /// The largest distance of a ray origin from the grid (per axis, to the box's far side) that
@@ -226,7 +274,11 @@ impl UniformGrid {
     }
 
     /// Gives the grid's bytes back to the budget it was charged to and drops it.
-    pub fn release(self, budget: &mut MemoryBudget) {
+    pub fn release(mut self, budget: &mut MemoryBudget) {
+        for n in self.nested.drain(..) {
+            n.grid.release(budget);
+        }
+        budget.free(self.nested);
         budget.free(self.offsets);
         self.blocks.release(budget);
         match self.lists {

@@ -262,9 +262,135 @@ fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
             skipped_any |= with.cells < without.cells;
             agree(&mesh, &grid, ray);
         }
-        // The largest cell counted in the build is the longest list, padding excluded.
-        let longest = (0..grid.cell_count()).map(|c| grid.listed(c)).max();
+        // The largest cell counted in the build is the longest list tested whole, padding
+        // excluded: of a cell without a nested grid, or in a nested grid.
+        let nested = grid.nested_cells();
+        let outer = (0..grid.cell_count())
+            .filter(|c| !nested.contains(c))
+            .map(|c| grid.listed(c));
+        let inner = grid.nested.iter().flat_map(|n| {
+            let g = &n.grid;
+            (0..g.cell_count()).map(move |c| g.listed(c))
+        });
+        let longest = outer.chain(inner).max();
         assert_eq!(grid.largest_cell() as u32, longest.unwrap_or(0));
     }
     assert!(skipped_any, "no ray stepped over an empty block");
+}
+
+/// Rejects the hits of odd-numbered triangles (an accepting query's filter).
+struct EvenOnly;
+
+impl crate::triangle::Accept for EvenOnly {
+    fn accept(&self, prim: u32, _hit: &crate::triangle::TriHit) -> bool {
+        prim % 2 == 0
+    }
+}
+
+/// A cell's nested grid answers as the cell's whole list does. On scenes whose dense object lies in
+/// a few cells of a grid sized for the whole (which get nested grids, one or two levels deep), per
+/// ray: the same closest hit bit for bit as the same grid without nesting, the same any-hit answer,
+/// the brute force's answer, the same with an accept filter (the nested walk's kernel chooses its
+/// axes per call), and the counted walk's hit. Rays come at the object from around it, start inside
+/// its cells, hit anywhere in the nested cells (near their faces too), come from far away (the far
+/// walk, whose entry point and window differ), stop short of it (`tmax`), and have tiny direction
+/// components (scaled walks). The nested walks must also list far fewer triangles than the whole
+/// lists: otherwise the comparison would test nothing.
+#[test]
+fn nested_grids_answer_as_the_whole_lists_do() {
+    // Nested once (a cluster of small triangles at the centre of a large sphere), and twice (the
+    // field's large triangles in the sphere's cell shape its nested grid, and the sphere gets one
+    // more level).
+    let mut cluster = procedural::closed_sphere(40).transformed(10.0, [0.0; 3]);
+    cluster.append(&procedural::random_soup(3000, 5, 0.05).transformed(0.2, [-0.1; 3]));
+    // With clutter around the sphere, so that a hit the nested walk finds outside its cell (a large
+    // triangle listed there) can be beaten in a later cell of the outer walk.
+    let mut stadium = procedural::teapot_in_stadium(6_000, 2_000);
+    stadium.append(&procedural::random_soup(400, 9, 0.03).transformed(30.0, [-15.0, -15.0, 0.0]));
+    nesting_agrees(&cluster, Vec3::ZERO, 2000, 1);
+    nesting_agrees(&stadium, Vec3::new(0.0, 0.0, 0.5), 4000, 2);
+}
+
+/// [`nested_grids_answer_as_the_whole_lists_do`] on a scene whose grids nest `depth` deep, with `n`
+/// rays at the dense object around `centre`.
+fn nesting_agrees(data: &MeshData, centre: Vec3, n: usize, depth: usize) {
+    let mut budget = MemoryBudget::new(0);
+    let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+    let mut whole = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+    whole.drop_nested(&mut budget);
+    assert_eq!(grid.nesting_depth(), depth);
+    assert_eq!(whole.nested_count(), 0);
+    let brute = BruteForce::new(&mesh);
+    let mut rng = crate::workload::SplitMix64::new(0x0e57);
+    let mut random = |scale: f32| {
+        let v = Vec3::new(
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+        );
+        (v * scale, rng.next_f32())
+    };
+    // The nested cells' boxes, for rays that hit anywhere in them, near their faces too.
+    let boxes: Vec<Aabb> = grid
+        .nested_cells()
+        .into_iter()
+        .map(|c| nested::enlarged_cell(&grid, c))
+        .collect();
+    let (mut tests_nested, mut tests_whole) = (0u64, 0u64);
+    for i in 0..n {
+        let target = centre + random(1.4).0;
+        let (dir, stop) = random(2.0);
+        let in_cell = |r: (Vec3, f32)| {
+            let b = boxes[i % boxes.len()];
+            let p = b.min + (r.0 / 2.0 + Vec3::splat(0.5)) * (b.max - b.min);
+            Vec3::new(p.x, p.y, (r.1 - 0.2) * 1.5)
+        };
+        let ray = match i % 8 {
+            // Anywhere in a nested cell, on the field or the sphere.
+            6 | 7 => Ray::new(in_cell(random(2.0)) - dir * 20.0, dir),
+            0 => Ray::new(target - dir * 30.0, dir),
+            1 => Ray::new(target - dir * 2000.0, dir),
+            // Inside the sphere's cells, or on its surface.
+            2 => Ray::new(centre + random(1.2).0, dir),
+            // From so far that the nested grids' walks take the far path.
+            3 => Ray::new(target - dir * 3e6, dir),
+            // Stopping at or before the sphere.
+            4 => Ray::segment(target - dir * 30.0, dir, 0.0, 29.5 + 2.0 * stop),
+            // A direction with two components near zero.
+            _ => Ray::new(target - Vec3::Z * 40.0, Vec3::new(1e-30, -2e-39, 1.0)),
+        };
+        let (a, b) = (grid.intersect(&mesh, &ray), whole.intersect(&mesh, &ray));
+        assert!(a.same_bits(&b), "{ray:?}: nested {a:?}, whole lists {b:?}");
+        assert_eq!(
+            grid.occluded(&mesh, &ray),
+            whole.occluded(&mesh, &ray),
+            "{ray:?}"
+        );
+        let want = brute.intersect(&mesh, &ray);
+        assert!(a.same_bits(&want), "{ray:?}: {a:?}, brute force {want:?}");
+        let (fa, fb) = (
+            grid.intersect_accepting(&mesh, &ray, Some(&EvenOnly)),
+            brute.intersect_accepting(&mesh, &ray, Some(&EvenOnly)),
+        );
+        assert!(
+            fa.same_bits(&fb),
+            "{ray:?}: filtered {fa:?}, brute force {fb:?}"
+        );
+        assert_eq!(
+            grid.occluded_accepting(&mesh, &ray, Some(&EvenOnly)),
+            fb.is_hit(),
+            "{ray:?}"
+        );
+        let (mut with, mut without) = (GridWork::default(), GridWork::default());
+        let c = grid.intersect_counted(&mesh, &ray, &mut with);
+        whole.intersect_counted(&mesh, &ray, &mut without);
+        assert!(c.same_bits(&a), "{ray:?}: counted {c:?}, {a:?}");
+        tests_nested += u64::from(with.tests);
+        tests_whole += u64::from(without.tests);
+    }
+    assert!(
+        tests_nested * 10 < tests_whole,
+        "nested walks listed {tests_nested} triangles, whole lists {tests_whole}"
+    );
 }

@@ -5,12 +5,13 @@
 use glam::Vec3;
 
 use super::blocks::BLOCK;
+use super::nested::MAX_DEPTH;
 use super::{GridWork, UniformGrid};
 use crate::accel::brute::test_all;
 use crate::accel::Mailbox;
 use crate::mesh::TriMesh;
 use crate::ray::Hit;
-use crate::triangle::{PreparedRay, TriangleLoop, TriangleTest};
+use crate::triangle::{AnyKernel, PreparedRay, TriangleLoop, TriangleTest};
 
 /// One query's walk. `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
 pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
@@ -128,6 +129,7 @@ impl Line {
 /// (a finite difference times a finite inverse; `lo − org` times `inv` and `size·inv` apart could
 /// each overflow, and their sum be ∞ − ∞). It may cross planes until `k` reaches `k_end` (the
 /// box's face); a non-moving axis has `t_next = ∞` and `k = k_end`.
+#[derive(Clone, Copy)]
 struct Axes {
     t_next: [f32; 4],
     /// The next plane's index (exact: f32 would stop counting at 2^24 planes, and a grid may have
@@ -155,6 +157,17 @@ impl Axes {
     #[inline(always)]
     fn plane_t(&self, axis: usize, k: u32) -> f32 {
         (self.lo[axis] + k as f32 * self.size[axis] - self.org[axis]) * self.inv[axis]
+    }
+
+    /// The axis whose boundary comes first (ties to the lower axis), without branches, and its
+    /// crossing's t. A non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past
+    /// the window.
+    #[inline(always)]
+    fn next(&self) -> (usize, f32) {
+        let (tx, ty, tz) = (self.t_next[0], self.t_next[1], self.t_next[2]);
+        let not_x = !((tx <= ty) & (tx <= tz));
+        let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
+        (axis, self.t_next[axis])
     }
 
     /// Whether axis `a` moves (a non-moving one keeps `step = 0`).
@@ -314,15 +327,219 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         if grid.offsets.is_empty() {
             return best;
         }
-        let line = match Line::of(grid, test.ray()) {
-            Plan::Walk(line) => line,
-            Plan::Miss => return best,
-            Plan::TestAll => return test_all::<T, ANY>(&test, mesh),
+        let mut axes = Axes::none();
+        let Cursor {
+            mut index,
+            mut block,
+            mut t_stop,
+            no_exit,
+        } = match axes.start(grid, test.ray(), best.t, work, COUNT) {
+            Start::Walk(at) => at,
+            Start::Nothing => return best,
+            Start::TooFar => return test_all::<T, ANY>(&test, mesh),
         };
         let mut mailbox = Mailbox::new();
-        let shape = &grid.shape;
-        let t_start = line.t0.clamp(-f32::MAX, f32::MAX);
-        let mut axes = Axes {
+        loop {
+            // The axis whose boundary comes first (ties to the lower axis), without branches. A
+            // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
+            let (tx, ty, tz) = (axes.t_next[0], axes.t_next[1], axes.t_next[2]);
+            let not_x = !((tx <= ty) & (tx <= tz));
+            let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
+            let t_axis = axes.t_next[axis];
+            if COUNT {
+                work.cells += 1;
+            }
+            let span = grid.span(index);
+            if span.0 != span.1 {
+                // Only a list at least `nested_span` long may have a nested grid (usize::MAX when
+                // none has): the rest of the walk then leaves this loop, so that it keeps its
+                // registers (a long list without one is tested there).
+                if span.1 - span.0 >= grid.nested_span {
+                    let at = Cursor {
+                        index,
+                        block,
+                        t_stop,
+                        no_exit,
+                    };
+                    let test = test.any_axes();
+                    return walk_nested::<ANY>(grid, test, mesh, work, COUNT, axes, at, best);
+                }
+                if COUNT {
+                    work.tests += grid.listed(index);
+                }
+                if let Some(h) =
+                    grid.test_span::<T, ANY>(&test, mesh, span, &mut best, &mut mailbox)
+                {
+                    return h;
+                }
+                t_stop = t_stop.min(best.t.max(no_exit));
+            }
+            if t_axis >= t_stop {
+                return best;
+            }
+            if axes.k[axis] == axes.k_end[axis] {
+                return best;
+            }
+            // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
+            // cell's far plane on that side and stops at the box's face.
+            index = index.wrapping_add(axes.delta[axis]);
+            let crossed = axes.k[axis];
+            let k = crossed.wrapping_add(axes.step[axis]);
+            axes.k[axis] = k;
+            axes.t_next[axis] = axes.plane_t(axis, k);
+            debug_assert!(index < grid.cell_count());
+            // A block's face: the next cell is in the neighbouring block, which may be empty.
+            if crossed & grid.blocks.faces == 0 {
+                block = block.wrapping_add(axes.block_delta[axis]);
+                let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
+                    return best;
+                };
+                if COUNT {
+                    work.cells += steps;
+                }
+            }
+        }
+    }
+}
+
+/// The rest of a walk of `grid` from the position `axes`, `at` — a cell with a nested grid —
+/// with the best hit so far, walking a cell's nested grid in place of its list (and so on, up to
+/// `MAX_DEPTH` deep). Entering one saves the outer walk's position, which is taken up again when
+/// the nested walk ends.
+///
+/// A hit of one of the cell's triangles at a point inside the cell's enlarged box lies inside the
+/// nested grid's box, where the nested walk finds it as the outer walk finds hits in its cells; a
+/// hit elsewhere is found in the cell holding its point, as without nesting (docs/design.md,
+/// "Nested grids"). The nested walk's early exit starts bounded by the best hit so far.
+///
+/// Out of line and cold, with the test's axes chosen per call: one copy for the six kernels, and
+/// the outer walk's loop keeps its registers.
+#[cold]
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn walk_nested<const ANY: bool>(
+    grid: &UniformGrid,
+    test: AnyKernel<'_>,
+    mesh: &TriMesh,
+    work: &mut GridWork,
+    count: bool,
+    mut axes: Axes,
+    mut at: Cursor,
+    mut best: Hit,
+) -> Hit {
+    let ray = test.ray();
+    // A fresh mailbox (the outer loop's stays in its registers): at worst a triangle is tested
+    // again, with the same answer.
+    let mut mailbox = Mailbox::new();
+    // The grid walked, and the outer walks' places while nested grids are walked.
+    let mut walked = grid;
+    let mut outer: [Option<(&UniformGrid, Axes, Cursor)>; MAX_DEPTH] = [None; MAX_DEPTH];
+    let mut depth = 0;
+    // The cell `at` was counted by the outer loop.
+    let mut counted = true;
+    loop {
+        let (axis, t_axis) = axes.next();
+        if count && !counted {
+            work.cells += 1;
+        }
+        counted = false;
+        let span = walked.span(at.index);
+        if span.0 != span.1 {
+            // A list whose nested grid cannot take the ray is tested whole.
+            let mut whole = true;
+            // (A grid at the deepest level has none: its `nested_span` is usize::MAX.)
+            if span.1 - span.0 >= walked.nested_span {
+                if let Some(sub) = walked.nested_at(at.index) {
+                    let mut inner = Axes::none();
+                    match inner.start(sub, ray, best.t, work, count) {
+                        // A slot is free: nested grids go no deeper than MAX_DEPTH.
+                        Start::Walk(inner_at) => {
+                            if let Some(slot) = outer.get_mut(depth) {
+                                *slot = Some((walked, core::mem::replace(&mut axes, inner), at));
+                                depth += 1;
+                                (walked, at) = (sub, inner_at);
+                                continue;
+                            }
+                        }
+                        Start::Nothing => whole = false,
+                        Start::TooFar => {}
+                    }
+                }
+            }
+            if whole {
+                if count {
+                    work.tests += walked.listed(at.index);
+                }
+                if let Some(h) =
+                    walked.test_span::<_, ANY>(&test, mesh, span, &mut best, &mut mailbox)
+                {
+                    return h;
+                }
+            }
+            at.t_stop = at.t_stop.min(best.t.max(at.no_exit));
+        }
+        // The next cell, of this walk or, when it ends, of the outer one.
+        let (mut axis, mut t_axis) = (axis, t_axis);
+        while !step(
+            walked,
+            &mut axes,
+            axis,
+            t_axis,
+            &mut at.index,
+            &mut at.block,
+            at.t_stop,
+            work,
+            count,
+        ) {
+            let Some((grid, outer_axes, outer_at)) = depth
+                .checked_sub(1)
+                .and_then(|d| outer.get_mut(d))
+                .and_then(Option::take)
+            else {
+                return best;
+            };
+            depth -= 1;
+            (walked, axes, at) = (grid, outer_axes, outer_at);
+            at.t_stop = at.t_stop.min(best.t.max(at.no_exit));
+            (axis, t_axis) = axes.next();
+        }
+    }
+}
+
+/// Where a walk is, besides its axes: the cell, its block, and when to stop.
+#[derive(Clone, Copy)]
+struct Cursor {
+    /// The current cell's flat index (below the grid's cell count).
+    index: usize,
+    /// The current cell's block.
+    block: usize,
+    /// The walk ends at the first cell whose exit `t_axis` reaches `t_stop`: past the window
+    /// (`t_axis > t1`, i.e. `t_axis ≥ next_up(t1)`), or, with the early exit, at or past the best
+    /// hit (a triangle not yet tested lies beyond the current cell by the insertion margin, so a
+    /// hit before the cell's exit cannot be beaten).
+    t_stop: f32,
+    /// −∞ with the early exit, else +∞: `t_stop = min(t_stop, max(best.t, no_exit))` keeps `t_stop`
+    /// at the window's end when the early exit is off.
+    no_exit: f32,
+}
+
+/// How a walk starts.
+enum Start {
+    /// At this cell (its axes written), in a block that holds triangles.
+    Walk(Cursor),
+    /// No cell with triangles lies in the ray's window.
+    Nothing,
+    /// The ray's origin is too far for any walk of this grid: its triangles must be tested whole.
+    TooFar,
+}
+
+impl Axes {
+    /// Axes that move on no axis, for [`Axes::start`] to fill. (A function, not a constant: the
+    /// constant was copied whole per ray, the literal's stores that `start` overwrites are
+    /// dropped.)
+    #[inline(always)]
+    fn none() -> Axes {
+        Axes {
             t_next: [f32::INFINITY; 4],
             k: [0; 4],
             k_end: [0; 4],
@@ -334,7 +551,29 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             inv: [0.0; 4],
             start: [0; 4],
             block_delta: [0; 4],
+        }
+    }
+
+    /// Starts the walk of `grid` (not empty) for `r`, its early exit bounded by `limit` (the best
+    /// hit's t so far), at its first cell in a block that holds triangles, writing its axes over
+    /// `self` ([`Axes::none`]); `count` counts the blocks stepped over.
+    #[inline(always)]
+    fn start(
+        &mut self,
+        grid: &UniformGrid,
+        r: &PreparedRay,
+        limit: f32,
+        work: &mut GridWork,
+        count: bool,
+    ) -> Start {
+        let axes = self;
+        let line = match Line::of(grid, r) {
+            Plan::Walk(line) => line,
+            Plan::Miss => return Start::Nothing,
+            Plan::TestAll => return Start::TooFar,
         };
+        let shape = &grid.shape;
+        let t_start = line.t0.clamp(-f32::MAX, f32::MAX);
         let mut index = 0usize;
         let mut block = 0usize;
         let mut stride = 1usize;
@@ -372,69 +611,65 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             stride *= res as usize;
             block_stride *= grid.blocks.res[a] as usize;
         }
-        // The walk ends at the first cell whose exit `t_axis` reaches `t_stop`: past the window
-        // (`t_axis > t1`, i.e. `t_axis ≥ next_up(t1)`), or, with the early exit, at or past the
-        // best hit (a triangle not yet tested lies beyond the current cell by the insertion margin,
-        // so a hit before the cell's exit cannot be beaten). `no_exit` keeps `t_stop` at the
-        // window's end when the early exit is off (`max(best.t, ∞) = ∞`).
-        let mut t_stop = next_up(line.t1);
         let no_exit = if line.early_exit {
             f32::NEG_INFINITY
         } else {
             f32::INFINITY
         };
+        let t_stop = next_up(line.t1).min(limit.max(no_exit));
         let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
-            return best;
+            return Start::Nothing;
         };
-        if COUNT {
+        if count {
             work.cells += steps;
         }
-        loop {
-            // The axis whose boundary comes first (ties to the lower axis), without branches. A
-            // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
-            let (tx, ty, tz) = (axes.t_next[0], axes.t_next[1], axes.t_next[2]);
-            let not_x = !((tx <= ty) & (tx <= tz));
-            let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
-            let t_axis = axes.t_next[axis];
-            if COUNT {
-                work.cells += 1;
-                work.tests += grid.listed(index);
-            }
-            let span = grid.span(index);
-            if span.0 != span.1 {
-                if let Some(h) =
-                    grid.test_span::<T, ANY>(&test, mesh, span, &mut best, &mut mailbox)
-                {
-                    return h;
-                }
-                t_stop = t_stop.min(best.t.max(no_exit));
-            }
-            if t_axis >= t_stop {
-                return best;
-            }
-            if axes.k[axis] == axes.k_end[axis] {
-                return best;
-            }
-            // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
-            // cell's far plane on that side and stops at the box's face.
-            index = index.wrapping_add(axes.delta[axis]);
-            let crossed = axes.k[axis];
-            let k = crossed.wrapping_add(axes.step[axis]);
-            axes.k[axis] = k;
-            axes.t_next[axis] = axes.plane_t(axis, k);
-            debug_assert!(index < grid.cell_count());
-            // A block's face: the next cell is in the neighbouring block, which may be empty.
-            if crossed & grid.blocks.faces == 0 {
-                block = block.wrapping_add(axes.block_delta[axis]);
-                let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
-                    return best;
-                };
-                if COUNT {
-                    work.cells += steps;
-                }
-            }
+        Start::Walk(Cursor {
+            index,
+            block,
+            t_stop,
+            no_exit,
+        })
+    }
+}
+
+/// Steps `axes` along `axis` (from [`Axes::next`], its crossing at `t_axis`) from cell `index`
+/// (in block `block`) of `grid` to the next cell that holds triangles; false when the walk ends
+/// first (see [`Cursor::t_stop`]).
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn step(
+    grid: &UniformGrid,
+    axes: &mut Axes,
+    axis: usize,
+    t_axis: f32,
+    index: &mut usize,
+    block: &mut usize,
+    t_stop: f32,
+    work: &mut GridWork,
+    count: bool,
+) -> bool {
+    if t_axis >= t_stop || axes.k[axis] == axes.k_end[axis] {
+        return false;
+    }
+    // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the cell's
+    // far plane on that side and stops at the box's face.
+    *index = index.wrapping_add(axes.delta[axis]);
+    let crossed = axes.k[axis];
+    let k = crossed.wrapping_add(axes.step[axis]);
+    axes.k[axis] = k;
+    axes.t_next[axis] = axes.plane_t(axis, k);
+    debug_assert!(*index < grid.cell_count());
+    // A block's face: the next cell is in the neighbouring block, which may be empty.
+    if crossed & grid.blocks.faces == 0 {
+        *block = block.wrapping_add(axes.block_delta[axis]);
+        let Some(steps) = axes.enter_block(grid, block, index, t_stop) else {
+            return false;
+        };
+        if count {
+            work.cells += steps;
         }
     }
+    true
 }
 
 /// The smallest f32 above `x` (`x` itself for NaN and +∞).
