@@ -246,7 +246,7 @@ impl UniformGrid {
             + self
                 .nested
                 .iter()
-                .map(|n| n.grid.memory_bytes())
+                .map(|n| n.grid.memory_bytes() + bytes_of(&n.large_ids) + bytes_of(&n.large))
                 .sum::<usize>()
             + match &self.lists {
                 Lists::Packed { ids, tris } => bytes_of(ids) + bytes_of(tris),
@@ -276,7 +276,7 @@ impl UniformGrid {
     /// Gives the grid's bytes back to the budget it was charged to and drops it.
     pub fn release(mut self, budget: &mut MemoryBudget) {
         for n in self.nested.drain(..) {
-            n.grid.release(budget);
+            n.release(budget);
         }
         budget.free(self.nested);
         budget.free(self.offsets);

@@ -6,7 +6,6 @@
 
 use glam::Vec3;
 
-#[cfg(test)]
 use alloc::vec::Vec;
 
 use super::build::Members;
@@ -15,15 +14,17 @@ use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::ray::{Aabb, Hit};
+use crate::triangle::Block4;
 
-/// Grids nest at most this deep (the outer grid is depth 0): a teapot in a stadium whose cell
-/// also holds the field's large triangles gets a nested grid shaped by the field, and the sphere
-/// gets its own grid one level further down.
-pub(super) const MAX_DEPTH: usize = 2;
+/// Grids nest at most this deep (the outer grid is depth 0). The code takes any depth; with two
+/// levels (before the cells' large triangles were kept out of the nested grids' boxes) stadium-1M's
+/// build took 1.3× as long as with one for rays no faster (docs/performance.md, "Stop 23").
+pub(super) const MAX_DEPTH: usize = 1;
 
-/// Lists shorter than this are tested whole: a nested walk's setup and cell steps cost about as
-/// much as testing a few hundred triangles four at a time (docs/performance.md).
-pub(super) const NESTED_MIN: usize = 256;
+/// Lists shorter than this are tested whole. A nested grid costs a build over its triangles (about
+/// as much per triangle as the outer grid's): at 256 (two levels) munich's and stadium-10k's builds
+/// took 1.7× and 4.8× as long for rays at most 6 % faster (docs/performance.md, "Stop 23").
+pub(super) const NESTED_MIN: usize = 1024;
 
 /// A cell step's price in triangle tests, for the check that a nested grid pays (the built-in
 /// calibration's grid prices: 14.5 ns a cell, 1.04 ns a listed triangle).
@@ -38,8 +39,24 @@ const NESTED_GAIN: f64 = 0.5;
 pub(super) struct Nested {
     /// The cell's flat index in the outer grid.
     pub cell: usize,
-    /// A grid over the cell's list (nested grids of its own up to [`MAX_DEPTH`]).
+    /// A grid over the cell's triangles no larger than the cell (with nested grids of its own
+    /// below [`MAX_DEPTH`]), in the part of the cell they occupy.
     pub grid: UniformGrid,
+    /// The cell's triangles larger than the cell on some axis (a stadium's field around its
+    /// teapot), tested whole on entering it, four to a block (ids, gap lanes `Hit::INVALID_ID`)...
+    pub large_ids: Vec<[u32; 4]>,
+    /// ...and their triangles (gap lanes NaN).
+    pub large: Vec<Block4>,
+    /// How many large triangles there are (padding excluded).
+    pub large_count: u32,
+}
+
+impl Nested {
+    pub fn release(self, budget: &mut MemoryBudget) {
+        self.grid.release(budget);
+        budget.free(self.large_ids);
+        budget.free(self.large);
+    }
 }
 
 /// Gives each cell of `grid` listing at least [`NESTED_MIN`] triangles a nested grid over them,
@@ -70,7 +87,7 @@ pub(super) fn nest(
     let mut result = Ok(());
     for cell in heavy {
         match nest_cell(grid, cell, mesh, params, budget, depth + 1) {
-            Ok(Some(sub)) => nested.push(Nested { cell, grid: sub }),
+            Ok(Some(n)) => nested.push(n),
             Ok(None) => {}
             Err(e) => {
                 result = Err(e);
@@ -96,8 +113,8 @@ pub(super) fn nest(
     result
 }
 
-/// The longest list a walk of `grid` tests whole: of a cell without a nested grid, or of a cell of
-/// a nested grid.
+/// The longest list a walk of `grid` tests whole: of a cell without a nested grid, of a nested
+/// cell's large triangles, or of a cell of a nested grid.
 fn largest_tested(grid: &UniformGrid) -> usize {
     let outer = (0..grid.cell_count())
         .filter(|&c| grid.nested_at(c).is_none())
@@ -106,7 +123,7 @@ fn largest_tested(grid: &UniformGrid) -> usize {
         .unwrap_or(0);
     grid.nested
         .iter()
-        .map(|n| n.grid.largest_cell)
+        .map(|n| n.grid.largest_cell.max(n.large_count as usize))
         .fold(outer, usize::max)
 }
 
@@ -119,49 +136,120 @@ fn nest_cell(
     params: &GridParams,
     budget: &mut MemoryBudget,
     depth: usize,
-) -> Result<Option<UniformGrid>, BuildError> {
+) -> Result<Option<Nested>, BuildError> {
     let (first, end) = grid.span(cell);
-    let mut ids = budget.vec::<u32>((end - first) * 4, "nested grid ids")?;
-    match &grid.lists {
-        Lists::Packed { ids: blocks, .. } => ids.extend(
-            blocks
-                .get(first..end)
-                .unwrap_or(&[])
-                .iter()
-                .flatten()
-                .filter(|&&p| p != Hit::INVALID_ID),
-        ),
-        Lists::Indexed { ids: listed, .. } => {
-            ids.extend(listed.get(first..end).unwrap_or(&[]).iter());
+    let listed = |p: &u32| *p != Hit::INVALID_ID;
+    let ids: Vec<u32> = match &grid.lists {
+        Lists::Packed { ids: blocks, .. } => {
+            let blocks = blocks.get(first..end).unwrap_or(&[]);
+            let mut ids = budget.vec(blocks.len() * 4, "nested grid ids")?;
+            ids.extend(blocks.iter().flatten().filter(|p| listed(p)));
+            ids
         }
-    }
+        Lists::Indexed { ids: list, .. } => {
+            let list = list.get(first..end).unwrap_or(&[]);
+            let mut ids = budget.vec(list.len(), "nested grid ids")?;
+            ids.extend(list.iter().filter(|p| listed(p)));
+            ids
+        }
+    };
+    let n = ids.len();
     let tris = mesh.triangles();
-    let listed_bounds = ids
+    let size = grid.shape.cell_size;
+    // Triangles larger than the cell would stretch the nested grid over the whole cell (the field
+    // around a teapot): they are tested whole, the rest gets the grid.
+    let is_large = |p: u32| {
+        tris.get(p as usize)
+            .is_some_and(|t| Aabb::of_triangle(t).extent().cmpgt(size).any())
+    };
+    let large_n = ids.iter().filter(|&&p| is_large(p)).count();
+    let result = if n < NESTED_MIN || 2 * large_n > n {
+        Ok(None)
+    } else {
+        nest_small(
+            grid, cell, &ids, large_n, &is_large, mesh, params, budget, depth,
+        )
+    };
+    budget.free(ids);
+    result
+}
+
+/// [`nest_cell`] once the cell's `ids` are known, `large_n` of them large (`is_large`).
+#[allow(clippy::too_many_arguments)]
+fn nest_small(
+    grid: &UniformGrid,
+    cell: usize,
+    ids: &[u32],
+    large_n: usize,
+    is_large: &impl Fn(u32) -> bool,
+    mesh: &TriMesh,
+    params: &GridParams,
+    budget: &mut MemoryBudget,
+    depth: usize,
+) -> Result<Option<Nested>, BuildError> {
+    let tris = mesh.triangles();
+    let mut small = budget.vec::<u32>(ids.len() - large_n, "nested grid ids")?;
+    small.extend(ids.iter().copied().filter(|&p| !is_large(p)));
+    let small_bounds = small
         .iter()
         .filter_map(|&p| tris.get(p as usize))
         .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)));
     let cell_box = enlarged_cell(grid, cell);
     let tight = Aabb {
-        min: listed_bounds.min.max(cell_box.min),
-        max: listed_bounds.max.min(cell_box.max),
+        min: small_bounds.min.max(cell_box.min),
+        max: small_bounds.max.min(cell_box.max),
     };
-    if ids.len() < NESTED_MIN || tight.is_empty() {
-        budget.free(ids);
+    if small.is_empty() || tight.is_empty() {
+        budget.free(small);
         return Ok(None);
     }
-    let n = ids.len();
-    let sub = UniformGrid::build_over(mesh, Members::Listed(&ids), tight, n, params, budget);
-    budget.free(ids);
-    let mut sub = sub?;
-    if !pays(&sub, n) {
+    let built = UniformGrid::build_over(
+        mesh,
+        Members::Listed(&small),
+        tight,
+        small.len(),
+        params,
+        budget,
+    );
+    budget.free(small);
+    let sub = built?;
+    if !pays(&sub, large_n, ids.len()) {
         sub.release(budget);
         return Ok(None);
     }
-    if let Err(e) = nest(&mut sub, mesh, params, budget, depth) {
-        sub.release(budget);
+    let blocks = large_n.div_ceil(4);
+    let mut large_ids = match budget.filled(blocks, [Hit::INVALID_ID; 4], "nested grid ids") {
+        Ok(v) => v,
+        Err(e) => {
+            sub.release(budget);
+            return Err(e);
+        }
+    };
+    let lanes = large_ids.as_flattened_mut().iter_mut();
+    for (lane, p) in lanes.zip(ids.iter().copied().filter(|&p| is_large(p))) {
+        *lane = p;
+    }
+    let mut large = match budget.vec::<Block4>(blocks, "triangle packs") {
+        Ok(v) => v,
+        Err(e) => {
+            sub.release(budget);
+            budget.free(large_ids);
+            return Err(e);
+        }
+    };
+    large.extend(large_ids.iter().map(|&four| Block4::gather(tris, four)));
+    let mut nested = Nested {
+        cell,
+        grid: sub,
+        large_ids,
+        large,
+        large_count: large_n as u32,
+    };
+    if let Err(e) = nest(&mut nested.grid, mesh, params, budget, depth) {
+        nested.release(budget);
         return Err(e);
     }
-    Ok(Some(sub))
+    Ok(Some(nested))
 }
 
 /// The box of `cell` enlarged by twice the insertion margin: it holds every point at which a
@@ -180,10 +268,11 @@ pub(super) fn enlarged_cell(grid: &UniformGrid, cell: usize) -> Aabb {
 }
 
 /// Whether a ray crossing `sub`'s box is expected to cost at most [`NESTED_GAIN`] of testing all
-/// `n` triangles: a line crossing a convex box crosses a convex part of it with probability area
-/// over area (isotropic lines), so it lists `references · a/A` triangles and steps through
-/// `cells · a/A` cells on average (`a` a cell's area, `A` the box's).
-fn pays(sub: &UniformGrid, n: usize) -> bool {
+/// `n` triangles when `large` of them are tested whole besides: a line crossing a convex box
+/// crosses a convex part of it with probability area over area (isotropic lines), so it lists
+/// `references · a/A` triangles and steps through `cells · a/A` cells on average (`a` a cell's
+/// area, `A` the box's).
+fn pays(sub: &UniformGrid, large: usize, n: usize) -> bool {
     let area = |e: Vec3| e.x * e.y + e.y * e.z + e.z * e.x;
     let shape = &sub.shape;
     let (a, whole) = (area(shape.cell_size), area(shape.bounds.extent()));
@@ -191,19 +280,18 @@ fn pays(sub: &UniformGrid, n: usize) -> bool {
         return false;
     }
     let share = f64::from(a / whole);
-    let expected = (sub.references as f64 + CELL_IN_TESTS * sub.cell_count() as f64) * share;
-    expected <= NESTED_GAIN * n as f64
+    let crossing = (sub.references as f64 + CELL_IN_TESTS * sub.cell_count() as f64) * share;
+    large as f64 + crossing <= NESTED_GAIN * n as f64
 }
 
 impl UniformGrid {
     /// The nested grid of cell `index`, if it has one.
     #[inline]
-    pub(super) fn nested_at(&self, index: usize) -> Option<&UniformGrid> {
+    pub(super) fn nested_at(&self, index: usize) -> Option<&Nested> {
         self.nested
             .binary_search_by_key(&index, |n| n.cell)
             .ok()
             .and_then(|i| self.nested.get(i))
-            .map(|n| &n.grid)
     }
 }
 
@@ -213,7 +301,7 @@ impl UniformGrid {
     /// compare nesting with).
     pub(super) fn drop_nested(&mut self, budget: &mut MemoryBudget) {
         for n in self.nested.drain(..) {
-            n.grid.release(budget);
+            n.release(budget);
         }
         self.nested_span = usize::MAX;
     }

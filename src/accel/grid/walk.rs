@@ -8,7 +8,7 @@ use super::blocks::BLOCK;
 use super::nested::MAX_DEPTH;
 use super::{GridWork, UniformGrid};
 use crate::accel::brute::test_all;
-use crate::accel::Mailbox;
+use crate::accel::{test_blocks, Mailbox};
 use crate::mesh::TriMesh;
 use crate::ray::Hit;
 use crate::triangle::{AnyKernel, PreparedRay, TriangleLoop, TriangleTest};
@@ -445,7 +445,21 @@ fn walk_nested<const ANY: bool>(
             let mut whole = true;
             // (A grid at the deepest level has none: its `nested_span` is usize::MAX.)
             if span.1 - span.0 >= walked.nested_span {
-                if let Some(sub) = walked.nested_at(at.index) {
+                if let Some(nested) = walked.nested_at(at.index) {
+                    // The cell's triangles larger than the cell first, then its nested grid.
+                    if count {
+                        work.tests += nested.large_count;
+                    }
+                    let ids = &nested.large_ids;
+                    let id = |b: usize, lane: usize| {
+                        ids.get(b).map_or(Hit::INVALID_ID, |four| four[lane & 3])
+                    };
+                    if let Some(h) =
+                        test_blocks::<_, ANY>(&test, &nested.large, id, &mut best, &mut mailbox)
+                    {
+                        return h;
+                    }
+                    let sub = &nested.grid;
                     let mut inner = Axes::none();
                     match inner.start(sub, ray, best.t, work, count) {
                         // A slot is free: nested grids go no deeper than MAX_DEPTH.
