@@ -342,12 +342,9 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         };
         let mut mailbox = Mailbox::new();
         loop {
-            // The axis whose boundary comes first (ties to the lower axis), without branches. A
-            // non-moving axis has t = ∞ and is chosen only when every axis is at ∞, past t1.
-            let (tx, ty, tz) = (axes.t_next[0], axes.t_next[1], axes.t_next[2]);
-            let not_x = !((tx <= ty) & (tx <= tz));
-            let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
-            let t_axis = axes.t_next[axis];
+            // The axis the walk leaves this cell by (chosen before the cell's test, which does not
+            // change it).
+            let (axis, t_axis) = axes.next();
             if COUNT {
                 work.cells += 1;
             }
@@ -374,29 +371,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 }
                 t_stop = t_stop.min(best.t.max(no_exit));
             }
-            if t_axis >= t_stop {
+            if !step(
+                grid, &mut axes, axis, t_axis, &mut index, &mut block, t_stop, work, COUNT,
+            ) {
                 return best;
-            }
-            if axes.k[axis] == axes.k_end[axis] {
-                return best;
-            }
-            // Stepping `axis` keeps every coordinate of the cell in [0, res): `k` starts at the
-            // cell's far plane on that side and stops at the box's face.
-            index = index.wrapping_add(axes.delta[axis]);
-            let crossed = axes.k[axis];
-            let k = crossed.wrapping_add(axes.step[axis]);
-            axes.k[axis] = k;
-            axes.t_next[axis] = axes.plane_t(axis, k);
-            debug_assert!(index < grid.cell_count());
-            // A block's face: the next cell is in the neighbouring block, which may be empty.
-            if crossed & grid.blocks.faces == 0 {
-                block = block.wrapping_add(axes.block_delta[axis]);
-                let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
-                    return best;
-                };
-                if COUNT {
-                    work.cells += steps;
-                }
             }
         }
     }
