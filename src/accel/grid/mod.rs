@@ -168,10 +168,7 @@ impl UniformGrid {
             });
         }
         let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
-        if let Err(e) = nested::nest(&mut grid, mesh, params, budget, 0) {
-            grid.release(budget);
-            return Err(e);
-        }
+        nested::nest(&mut grid, mesh, params, budget, 0);
         Ok(grid)
     }
 
@@ -223,7 +220,8 @@ impl UniformGrid {
 
     /// Number of triangle references over all cells, those of nested grids included.
     pub fn reference_count(&self) -> usize {
-        self.references + self.nested.iter().map(|n| n.grid.references).sum::<usize>()
+        let nested = |n: &Nested| n.grid.reference_count() + n.large_count as usize;
+        self.references + self.nested.iter().map(nested).sum::<usize>()
     }
 
     /// Number of cells with a nested grid of their own (docs/design.md, "Nested grids").
@@ -232,7 +230,9 @@ impl UniformGrid {
     }
 
     /// The most triangles a walk tests in one cell (padding excluded): the longest list of a cell
-    /// without a nested grid, here or in a nested grid (docs/design.md, "Nested grids").
+    /// without a nested grid, of a nested cell's triangles larger than the cell, or of a nested
+    /// grid's cell (docs/design.md, "Nested grids"). A ray whose origin is too far for a nested
+    /// grid's walk (beyond 2^40 of its cells) tests the nested cell's whole list instead.
     pub fn largest_cell(&self) -> usize {
         self.largest_cell
     }
@@ -260,11 +260,8 @@ impl UniformGrid {
             Lists::Packed { tris, .. } => bytes_of(tris),
             Lists::Indexed { packs, .. } => packs.memory_bytes(),
         };
-        own + self
-            .nested
-            .iter()
-            .map(|n| n.grid.pack_bytes())
-            .sum::<usize>()
+        let nested = |n: &Nested| n.grid.pack_bytes() + bytes_of(&n.large);
+        own + self.nested.iter().map(nested).sum::<usize>()
     }
 
     /// The largest distance of a ray origin from the grid (per axis, to the box's far side) that

@@ -9,6 +9,7 @@ use glam::Vec3;
 use alloc::vec::Vec;
 
 use super::build::Members;
+use super::layout::Shape;
 use super::{GridParams, Lists, UniformGrid};
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
@@ -40,7 +41,8 @@ pub(super) struct Nested {
     /// The cell's flat index in the outer grid.
     pub cell: usize,
     /// A grid over the cell's triangles no larger than the cell (with nested grids of its own
-    /// below [`MAX_DEPTH`]), in the part of the cell they occupy.
+    /// below [`MAX_DEPTH`]), in the box where their bounds meet the cell's box enlarged by two
+    /// margins (and `Shape::new`'s padding around that).
     pub grid: UniformGrid,
     /// The cell's triangles larger than the cell on some axis (a stadium's field around its
     /// teapot), tested whole on entering it, four to a block (ids, gap lanes `Hit::INVALID_ID`)...
@@ -60,17 +62,18 @@ impl Nested {
 }
 
 /// Gives each cell of `grid` listing at least [`NESTED_MIN`] triangles a nested grid over them,
-/// where one is expected to pay (see [`pays`]). Every allocation is charged to `budget`; on failure
-/// the caller releases the grid (and what was nested so far with it).
+/// where one is expected to pay (see [`pays`]). Nested grids are optional: a cell whose nested grid
+/// cannot be built (the memory budget, or a grid whose margin would swamp its cells) keeps its
+/// list, so the outer grid never fails for them. Every allocation is charged to `budget`.
 pub(super) fn nest(
     grid: &mut UniformGrid,
     mesh: &TriMesh,
     params: &GridParams,
     budget: &mut MemoryBudget,
     depth: usize,
-) -> Result<(), BuildError> {
+) {
     if depth >= MAX_DEPTH || grid.largest_cell < NESTED_MIN {
-        return Ok(());
+        return;
     }
     let unit = match grid.lists {
         Lists::Packed { .. } => 4,
@@ -83,16 +86,13 @@ pub(super) fn nest(
         let (first, end) = grid.span(c);
         end - first >= min_span
     });
-    let mut nested = budget.vec::<Nested>(heavy.clone().count(), "nested grids")?;
-    let mut result = Ok(());
+    let Ok(mut nested) = budget.vec::<Nested>(heavy.clone().count(), "nested grids") else {
+        return;
+    };
     for cell in heavy {
-        match nest_cell(grid, cell, mesh, params, budget, depth + 1) {
-            Ok(Some(n)) => nested.push(n),
-            Ok(None) => {}
-            Err(e) => {
-                result = Err(e);
-                break;
-            }
+        // A cell whose nested grid fails keeps its list (nest_cell gave back what it took).
+        if let Ok(Some(n)) = nest_cell(grid, cell, mesh, params, budget, depth + 1) {
+            nested.push(n);
         }
     }
     // The shortest nested cell's list: shorter lists (and long ones not worth a nested grid,
@@ -105,12 +105,8 @@ pub(super) fn nest(
         })
         .min()
         .unwrap_or(usize::MAX);
-    // Kept on failure too, so that releasing the grid gives their bytes back.
     grid.nested = nested;
-    if result.is_ok() {
-        grid.largest_cell = largest_tested(grid);
-    }
-    result
+    grid.largest_cell = largest_tested(grid);
 }
 
 /// The longest list a walk of `grid` tests whole: of a cell without a nested grid, of a nested
@@ -199,7 +195,13 @@ fn nest_small(
         min: small_bounds.min.max(cell_box.min),
         max: small_bounds.max.min(cell_box.max),
     };
-    if small.is_empty() || tight.is_empty() {
+    // The nested grid's margin covers rounding on the scene's coordinates (16u·A): for an object
+    // far from the origin against its size it would swamp small cells, and every triangle would be
+    // listed in most of them (λ·n² references). Such a cell keeps its list.
+    let swamped = Shape::new(tight, small.len().max(1), params.density).map_or(true, |shape| {
+        shape.margin.cmpgt(shape.cell_size * 0.25).any()
+    });
+    if small.is_empty() || tight.is_empty() || swamped {
         budget.free(small);
         return Ok(None);
     }
@@ -245,16 +247,13 @@ fn nest_small(
         large,
         large_count: large_n as u32,
     };
-    if let Err(e) = nest(&mut nested.grid, mesh, params, budget, depth) {
-        nested.release(budget);
-        return Err(e);
-    }
+    nest(&mut nested.grid, mesh, params, budget, depth);
     Ok(Some(nested))
 }
 
 /// The box of `cell` enlarged by twice the insertion margin: it holds every point at which a
 /// triangle of the cell's list meets the cell's box enlarged by the margin, whatever the rounding
-/// of the cell's planes (below `u·(A + E)`, against the margin's `16u·(A + E)`).
+/// of the cell's planes (a few `u·(A + E)`, against the margin's `16u·(A + E)`).
 pub(super) fn enlarged_cell(grid: &UniformGrid, cell: usize) -> Aabb {
     let shape = &grid.shape;
     let [rx, ry, _] = shape.res.map(|r| r as usize);

@@ -270,7 +270,9 @@ fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
             .map(|c| grid.listed(c));
         let inner = grid.nested.iter().flat_map(|n| {
             let g = &n.grid;
-            (0..g.cell_count()).map(move |c| g.listed(c))
+            (0..g.cell_count())
+                .map(move |c| g.listed(c))
+                .chain(core::iter::once(n.large_count))
         });
         let longest = outer.chain(inner).max();
         assert_eq!(grid.largest_cell() as u32, longest.unwrap_or(0));
@@ -391,4 +393,63 @@ fn nesting_agrees(data: &MeshData, centre: Vec3, n: usize, large: bool) {
         tests_nested * 10 < tests_whole,
         "nested walks listed {tests_nested} triangles, whole lists {tests_whole}"
     );
+}
+
+/// Nested grids are optional: a memory limit that leaves no room for them still builds the outer
+/// grid (without them, answering the same), and a cluster far from the origin against its size,
+/// where a nested grid's margin would swamp its cells, gets none.
+#[test]
+fn nested_grids_give_way_to_the_memory_limit_and_far_offsets() {
+    let mut cluster = procedural::closed_sphere(40).transformed(10.0, [0.0; 3]);
+    cluster.append(&procedural::random_soup(3000, 5, 0.05).transformed(0.2, [-0.1; 3]));
+    let mut unlimited = MemoryBudget::new(0);
+    let mesh = TriMesh::from_source(&cluster.as_source(), &mut unlimited).unwrap();
+    let full = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    assert!(full.nested_count() > 0);
+    let mut without = None;
+    let mut limit = full.memory_bytes() + 1;
+    while limit > 1024 {
+        let mut budget = MemoryBudget::new(limit);
+        match UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget) {
+            Ok(grid) if grid.nested_count() == 0 => {
+                without = Some(grid);
+                break;
+            }
+            Ok(_) => limit = limit * 9 / 10,
+            Err(_) => break,
+        }
+    }
+    let grid = without.expect("no limit built the outer grid without its nested grids");
+    let mut rng = crate::workload::SplitMix64::new(9);
+    for _ in 0..300 {
+        let d = Vec3::new(
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+        );
+        let ray = Ray::new(Vec3::splat(0.05) * rng.next_f32(), d);
+        let (a, b) = (grid.intersect(&mesh, &ray), full.intersect(&mesh, &ray));
+        assert!(a.same_bits(&b), "{ray:?}: {a:?} against {b:?}");
+    }
+    // The same cluster 10^6 of its sizes from the origin: no nested grid, the same answers.
+    let far = cluster.transformed(1.0, [2e5, 0.0, 0.0]);
+    let far_mesh = TriMesh::from_source(&far.as_source(), &mut unlimited).unwrap();
+    let mut far_budget = MemoryBudget::new(0);
+    let far_grid = UniformGrid::build(&far_mesh, &GridParams::DEFAULT, &mut far_budget).unwrap();
+    assert_eq!(far_grid.nested_count(), 0);
+    // Not even tried: built, it would list each triangle in most of its cells.
+    assert!(
+        far_budget.peak() < 3 * far_grid.memory_bytes(),
+        "peak {} for a grid of {}",
+        far_budget.peak(),
+        far_grid.memory_bytes()
+    );
+    for _ in 0..100 {
+        let d = Vec3::new(
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+            rng.next_f32() - 0.5,
+        );
+        agree(&far_mesh, &far_grid, &Ray::new(Vec3::new(2e5, 0.0, 0.0), d));
+    }
 }

@@ -1,6 +1,8 @@
 //! The walk: an Amanatides–Woo 3D-DDA over the cells a ray crosses inside `[tmin, tmax]`, front
 //! to back, testing each cell's list; far origins and extreme directions are walked on a
-//! rescaled line without the early exit (docs/design.md, "Uniform grid").
+//! rescaled line without the early exit (docs/design.md, "Uniform grid"). A ray that meets a cell
+//! with a nested grid is walked again by `walk_nested`, which walks nested grids in place of their
+//! cells' lists (docs/design.md, "Nested grids").
 
 use glam::Vec3;
 
@@ -425,9 +427,6 @@ fn walk_nested<const ANY: bool>(
             if span.1 - span.0 >= walked.nested_span {
                 if let Some(nested) = walked.nested_at(at.index) {
                     // The cell's triangles larger than the cell first, then its nested grid.
-                    if count {
-                        work.tests += nested.large_count;
-                    }
                     let ids = &nested.large_ids;
                     let id = |b: usize, lane: usize| {
                         ids.get(b).map_or(Hit::INVALID_ID, |four| four[lane & 3])
@@ -439,8 +438,14 @@ fn walk_nested<const ANY: bool>(
                     }
                     let sub = &nested.grid;
                     let mut inner = Axes::none();
-                    match inner.start(sub, ray, best.t, work, count) {
-                        // A slot is free: nested grids go no deeper than MAX_DEPTH.
+                    let start = inner.start(sub, ray, best.t, work, count);
+                    if count && !matches!(start, Start::TooFar) {
+                        // (On TooFar the whole list, large triangles included, is counted below.)
+                        work.tests += nested.large_count;
+                    }
+                    match start {
+                        // A slot is free, as nested grids go no deeper than MAX_DEPTH (without one
+                        // the whole list is tested).
                         Start::Walk(inner_at) => {
                             if let Some(slot) = outer.get_mut(depth) {
                                 *slot = Some((walked, core::mem::replace(&mut axes, inner), at));
@@ -515,7 +520,7 @@ struct Cursor {
 enum Start {
     /// At this cell (its axes written), in a block that holds triangles.
     Walk(Cursor),
-    /// No cell with triangles lies in the ray's window.
+    /// No cell with triangles lies in the ray's window before `limit` (with the early exit).
     Nothing,
     /// The ray's origin is too far for any walk of this grid: its triangles must be tested whole.
     TooFar,
