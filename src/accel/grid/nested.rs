@@ -134,62 +134,78 @@ fn nest_cell(
     depth: usize,
 ) -> Result<Option<Nested>, BuildError> {
     let (first, end) = grid.span(cell);
-    let listed = |p: &u32| *p != Hit::INVALID_ID;
-    let ids: Vec<u32> = match &grid.lists {
-        Lists::Packed { ids: blocks, .. } => {
-            let blocks = blocks.get(first..end).unwrap_or(&[]);
-            let mut ids = budget.vec(blocks.len() * 4, "nested grid ids")?;
-            ids.extend(blocks.iter().flatten().filter(|p| listed(p)));
-            ids
+    // The list's real ids (gap lanes skipped), at most `room` of them.
+    let (list, room): (&[u32], usize) = match &grid.lists {
+        Lists::Packed { ids, .. } => {
+            let blocks = ids.get(first..end).unwrap_or(&[]);
+            (blocks.as_flattened(), blocks.len() * 4)
         }
-        Lists::Indexed { ids: list, .. } => {
-            let list = list.get(first..end).unwrap_or(&[]);
-            let mut ids = budget.vec(list.len(), "nested grid ids")?;
-            ids.extend(list.iter().filter(|p| listed(p)));
-            ids
+        Lists::Indexed { ids, .. } => (ids.get(first..end).unwrap_or(&[]), end - first),
+    };
+    // One pass: triangles larger than the cell on some axis would stretch the nested grid over the
+    // whole cell (the field around a teapot), so they are tested whole; the rest gets the grid,
+    // in the box of their bounds.
+    let mut small = budget.vec::<u32>(room, "nested grid ids")?;
+    let mut large = match budget.vec::<u32>(room, "nested grid ids") {
+        Ok(v) => v,
+        Err(e) => {
+            budget.free(small);
+            return Err(e);
         }
     };
-    let n = ids.len();
     let tris = mesh.triangles();
     let size = grid.shape.cell_size;
-    // Triangles larger than the cell would stretch the nested grid over the whole cell (the field
-    // around a teapot): they are tested whole, the rest gets the grid.
-    let is_large = |p: u32| {
-        tris.get(p as usize)
-            .is_some_and(|t| Aabb::of_triangle(t).extent().cmpgt(size).any())
-    };
-    let large_n = ids.iter().filter(|&&p| is_large(p)).count();
-    let result = if n < NESTED_MIN || 2 * large_n > n {
+    let mut small_bounds = Aabb::EMPTY;
+    for &p in list.iter().filter(|&&p| p != Hit::INVALID_ID) {
+        let Some(tri) = tris.get(p as usize) else {
+            continue;
+        };
+        let bounds = Aabb::of_triangle(tri);
+        if bounds.extent().cmpgt(size).any() {
+            large.push(p);
+        } else {
+            small.push(p);
+            small_bounds = small_bounds.union(bounds);
+        }
+    }
+    let n = small.len() + large.len();
+    let result = if n < NESTED_MIN || 2 * large.len() > n {
         Ok(None)
     } else {
-        nest_small(
-            grid, cell, &ids, large_n, &is_large, mesh, params, budget, depth,
-        )
+        let split = Split {
+            small: &small,
+            small_bounds,
+            large: &large,
+        };
+        nest_small(grid, cell, split, mesh, params, budget, depth)
     };
-    budget.free(ids);
+    budget.free(small);
+    budget.free(large);
     result
 }
 
-/// [`nest_cell`] once the cell's `ids` are known, `large_n` of them large (`is_large`).
-#[allow(clippy::too_many_arguments)]
+/// A heavy cell's triangles: those no larger than the cell, their bounds, and the larger ones.
+struct Split<'a> {
+    small: &'a [u32],
+    small_bounds: Aabb,
+    large: &'a [u32],
+}
+
+/// [`nest_cell`] once the cell's triangles are split.
 fn nest_small(
     grid: &UniformGrid,
     cell: usize,
-    ids: &[u32],
-    large_n: usize,
-    is_large: &impl Fn(u32) -> bool,
+    split: Split<'_>,
     mesh: &TriMesh,
     params: &GridParams,
     budget: &mut MemoryBudget,
     depth: usize,
 ) -> Result<Option<Nested>, BuildError> {
-    let tris = mesh.triangles();
-    let mut small = budget.vec::<u32>(ids.len() - large_n, "nested grid ids")?;
-    small.extend(ids.iter().copied().filter(|&p| !is_large(p)));
-    let small_bounds = small
-        .iter()
-        .filter_map(|&p| tris.get(p as usize))
-        .fold(Aabb::EMPTY, |b, t| b.union(Aabb::of_triangle(t)));
+    let Split {
+        small,
+        small_bounds,
+        large: large_list,
+    } = split;
     let cell_box = enlarged_cell(grid, cell);
     let tight = Aabb {
         min: small_bounds.min.max(cell_box.min),
@@ -202,24 +218,21 @@ fn nest_small(
         shape.margin.cmpgt(shape.cell_size * 0.25).any()
     });
     if small.is_empty() || tight.is_empty() || swamped {
-        budget.free(small);
         return Ok(None);
     }
-    let built = UniformGrid::build_over(
+    let sub = UniformGrid::build_over(
         mesh,
-        Members::Listed(&small),
+        Members::Listed(small),
         tight,
         small.len(),
         params,
         budget,
-    );
-    budget.free(small);
-    let sub = built?;
-    if !pays(&sub, large_n, ids.len()) {
+    )?;
+    if !pays(&sub, large_list.len(), small.len() + large_list.len()) {
         sub.release(budget);
         return Ok(None);
     }
-    let blocks = large_n.div_ceil(4);
+    let blocks = large_list.len().div_ceil(4);
     let mut large_ids = match budget.filled(blocks, [Hit::INVALID_ID; 4], "nested grid ids") {
         Ok(v) => v,
         Err(e) => {
@@ -227,8 +240,7 @@ fn nest_small(
             return Err(e);
         }
     };
-    let lanes = large_ids.as_flattened_mut().iter_mut();
-    for (lane, p) in lanes.zip(ids.iter().copied().filter(|&p| is_large(p))) {
+    for (lane, &p) in large_ids.as_flattened_mut().iter_mut().zip(large_list) {
         *lane = p;
     }
     let mut large = match budget.vec::<Block4>(blocks, "triangle packs") {
@@ -239,13 +251,14 @@ fn nest_small(
             return Err(e);
         }
     };
+    let tris = mesh.triangles();
     large.extend(large_ids.iter().map(|&four| Block4::gather(tris, four)));
     let mut nested = Nested {
         cell,
         grid: sub,
         large_ids,
         large,
-        large_count: large_n as u32,
+        large_count: large_list.len() as u32,
     };
     nest(&mut nested.grid, mesh, params, budget, depth);
     Ok(Some(nested))
