@@ -15,21 +15,18 @@ use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::ray::{Aabb, Hit};
+use crate::select::calibration::Calibration;
 use crate::triangle::Block4;
 
 /// Grids nest at most this deep (the outer grid is depth 0). The code takes any depth; with two
 /// levels (before the cells' large triangles were kept out of the nested grids' boxes) stadium-1M's
-/// build took 1.3× as long as with one for rays no faster (docs/performance.md, "Stop 23").
+/// build took 1.2× as long as with one, for rays 10 % slower (docs/performance.md, "Stop 23").
 pub(super) const MAX_DEPTH: usize = 1;
 
 /// Lists shorter than this are tested whole. A nested grid costs a build over its triangles (about
 /// as much per triangle as the outer grid's): at 256 (two levels) munich's and stadium-10k's builds
 /// took 1.7× and 4.8× as long for rays at most 6 % faster (docs/performance.md, "Stop 23").
 pub(super) const NESTED_MIN: usize = 1024;
-
-/// A cell step's price in triangle tests, for the check that a nested grid pays (the built-in
-/// calibration's grid prices: 14.5 ns a cell, 1.04 ns a listed triangle).
-const CELL_IN_TESTS: f64 = 14.0;
 
 /// A nested grid keeps its place when a ray crossing it is expected to cost at most this share of
 /// testing the whole list.
@@ -54,6 +51,7 @@ pub(super) struct Nested {
 }
 
 impl Nested {
+    /// Gives the nested grid's and the large triangles' bytes back to `budget` and drops them.
     pub fn release(self, budget: &mut MemoryBudget) {
         self.grid.release(budget);
         budget.free(self.large_ids);
@@ -283,7 +281,7 @@ pub(super) fn enlarged_cell(grid: &UniformGrid, cell: usize) -> Aabb {
 /// `n` triangles when `large` of them are tested whole besides: a line crossing a convex box
 /// crosses a convex part of it with probability area over area (isotropic lines), so it lists
 /// `references · a/A` triangles and steps through `cells · a/A` cells on average (`a` a cell's
-/// area, `A` the box's).
+/// area, `A` the box's), a cell step priced as the selector's cost model prices it.
 fn pays(sub: &UniformGrid, large: usize, n: usize) -> bool {
     let area = |e: Vec3| e.x * e.y + e.y * e.z + e.z * e.x;
     let shape = &sub.shape;
@@ -292,7 +290,11 @@ fn pays(sub: &UniformGrid, large: usize, n: usize) -> bool {
         return false;
     }
     let share = f64::from(a / whole);
-    let crossing = (sub.references as f64 + CELL_IN_TESTS * sub.cell_count() as f64) * share;
+    // A cell step's price in listed triangles, from the built-in calibration's grid prices (the
+    // selector's cost model; 14 at stop 23). A build decides this before any calibration is known.
+    let calibration = Calibration::builtin();
+    let cell_in_tests = calibration.value(2) / calibration.value(3);
+    let crossing = (sub.references as f64 + cell_in_tests * sub.cell_count() as f64) * share;
     large as f64 + crossing <= NESTED_GAIN * n as f64
 }
 
