@@ -868,7 +868,7 @@ fn c_embedded() {
 /// `rq_scene_set_vertices`) and the grid of issue 13, raised to 334 000; 346 464 at stop 21 with the
 /// lean kd-tree walk and the filter that first tries the scene's bound, inline in every walk (out
 /// of line, the program stays at 334 176 bytes but the rays take 1.01–1.29× the time: measured),
-/// raised to 364 000; 362 848 at stop 22 with empty-block skipping; 391 520 at stop 23 with nested
+/// raised to 364 000; 362 848 at stop 22 with empty-block skipping; 395 616 at stop 23 with nested
 /// grids in heavy cells — the walk's one cold copy per query kind, the run-time-axes kernel it uses,
 /// the nested build — raised to 407 000). To raise it on purpose: run
 /// `cargo test --test c_api embedded_minimal -- --nocapture`, note the size it prints, set this to
