@@ -12,8 +12,8 @@
 //! - **Cost**: `C_t + C_i·(P_L·⌈N_L/4⌉ + P_R·⌈N_R/4⌉)` (times `1 − empty_bonus` when a child is
 //!   empty): the list test takes a leaf's triangles four at a time, so one to four cost the same.
 //! - **Termination** (pbrt's rule): a split no better than a leaf is still taken, as a "bad refine",
-//!   unless the node is small (under 16) and the split more than four times worse, or it has at most
-//!   8 triangles, or the path from the root already had three; after both children are built, a
+//!   when the path from the root had fewer than three and the node has more than 64 triangles, or
+//!   more than 8 and the split costs at most 1.05 times the leaf; after both children are built, a
 //!   subtree no cheaper than a leaf of its node's triangles is retracted into that leaf (Mitsuba).
 //! - **References**: a subtree may hold at most its share of the root's budget
 //!   (`max_references_per_triangle · N`), the share of a child proportional to its triangles, so no
@@ -48,16 +48,27 @@ struct Item {
 /// Bins per axis of the binned SAH.
 const BINS: usize = 32;
 
-/// A node below this many triangles that would cost over four times a leaf if split becomes a leaf
-/// at once (pbrt).
-const SMALL_NODE: usize = 16;
-
 /// A node of at most this many triangles (two blocks of the list test) whose best split is no
-/// cheaper than a leaf becomes that leaf, without the bad refine larger nodes may take: below it,
-/// the subtree of a bad refine was nearly always torn down again after being built (at 4 the trees
-/// of bunny, sibenik and spd_teapot were unchanged and the build 0.5–22 % cheaper; at 8 the build is
-/// 12–40 % cheaper for 0.0–1.0 % more instructions per ray, callgrind, docs/performance.md).
+/// cheaper than a leaf becomes that leaf: below it, the subtree of a bad refine was nearly always
+/// torn down again after being built (stop 19, docs/performance.md).
 const NO_BAD_REFINE: usize = 8;
+
+/// A node of at most this many triangles takes a bad refine only when its best split costs at most
+/// [`NEAR_TIE`] times a leaf. The subtrees of worse bad refines there were nearly always built and
+/// torn down again: with bad refines down to 9 triangles, the work in retracted subtrees was 7 % of
+/// bunny's build, 14 % of sibenik's, 27 % of spd_teapot's, 38 % of gears-10k's, 36 % of hair-50k's,
+/// and of the small nodes' bad refines that were kept, none cost 40 % more than a leaf and most
+/// within 5 %. Near ties keep the trees that need them (the Sierpinski tetrahedron's is unchanged:
+/// without any bad refine below 64 it tests 2.6× the triangles a ray). Measured against every bad
+/// refine (29 scenes, docs/performance.md, "Stop 24"): the builds take 0.43–0.93× the time
+/// (geometric mean 0.67) for 0.98× the time per ray, the trees a little smaller (bunny 2.13 → 1.97
+/// references per triangle), though 1–4 % more instructions per ray. Larger nodes keep every bad
+/// refine: triangles spanning the box at all angles (slivers) need several splits before any one
+/// pays, and without a bad refine at the root their scene is one leaf (3.2× the time per ray).
+const SMALL_NODE: usize = 64;
+
+/// See [`SMALL_NODE`].
+const NEAR_TIE: f64 = 1.05;
 
 /// Nodes of more than this many triangles are not made leaves by the automatic depth limit.
 const DEEP_NODE: usize = 48;
@@ -754,9 +765,9 @@ impl Builder<'_> {
             return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
         };
         if !(split.cost < leaf_cost) {
-            if (split.cost > 4.0 * leaf_cost && n < SMALL_NODE)
-                || bad >= MAX_BAD_REFINES
+            if bad >= MAX_BAD_REFINES
                 || n <= NO_BAD_REFINE
+                || (n <= SMALL_NODE && split.cost > NEAR_TIE * leaf_cost)
             {
                 return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
             }
@@ -1241,5 +1252,36 @@ mod tests {
                 "{bbox:?} axis {axis} at {pos}: price {price} cost {cost}"
             );
         }
+    }
+
+    /// Bad refines where they pay: slivers spanning the box need them at the root (without, the
+    /// tree is one leaf of every triangle), the Sierpinski tetrahedron needs its near ties in small
+    /// nodes (without, leaves of 32 triangles), and the small nodes' other bad refines are not
+    /// taken (the build does less work).
+    #[test]
+    fn bad_refines_where_they_pay() {
+        use crate::accel::kdtree::{KdTree, KdTreeParams};
+        use crate::budget::MemoryBudget;
+        let tree = |data: &crate::mesh::MeshData| {
+            let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+            KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap()
+        };
+        let slivers = tree(&crate::procedural::random_slivers(2000, 5));
+        assert!(
+            slivers.largest_leaf() <= 128 && slivers.leaf_count() > 100,
+            "slivers: {} leaves, the largest {}",
+            slivers.leaf_count(),
+            slivers.largest_leaf()
+        );
+        let tetra = tree(&crate::procedural::tetra(5));
+        assert_eq!(tetra.reference_count(), 4096);
+        assert!(tetra.largest_leaf() <= 16, "{}", tetra.largest_leaf());
+        // Every bad refine: 30.3 items per triangle (measured); near ties only: 19.2.
+        let gears = tree(&crate::procedural::by_name("gears", 5000).unwrap());
+        assert!(
+            gears.build_work() < 25 * 5040,
+            "gears: work {}",
+            gears.build_work()
+        );
     }
 }
