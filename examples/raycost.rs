@@ -7,7 +7,8 @@
 //!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
 //!     target/release/examples/raycost check 1 bunny               # the selector's check after a kd build
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
-//!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build
+//!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
+//!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
@@ -57,13 +58,26 @@ fn grid_trace(grid: &UniformGrid, mesh: &TriMesh, rays: &[Ray]) -> u32 {
 #[inline(never)]
 fn grid_build(data: &MeshData) -> (TriMesh, UniformGrid) {
     let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
-    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let grid = UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
     (mesh, grid)
 }
 
 #[inline(never)]
 fn kd_build(mesh: &TriMesh) -> KdTree {
     KdTree::build(mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap()
+}
+
+/// The default grid parameters, or the density `GRID_DENSITY` sets (to try other densities
+/// without a rebuild).
+fn grid_params() -> GridParams {
+    let mut p = GridParams::DEFAULT;
+    if let Some(d) = std::env::var("GRID_DENSITY")
+        .ok()
+        .and_then(|v| v.parse::<f32>().ok())
+    {
+        p.density = d;
+    }
+    p
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -91,7 +105,7 @@ fn main() {
             // grid is dropped only after the next is built).
             let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
             let (t, grid) = rayq::select::measure::time_ns(reps as u32, || {
-                UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0))
+                UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0))
             });
             let n = mesh.len() as f64;
             println!(
@@ -166,8 +180,7 @@ fn main() {
             continue;
         }
         let tree = kd_build(&mesh);
-        let grid =
-            UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+        let grid = UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
         let mut rng = SplitMix64::new(7);
         let mut rays = camera_rays(&mesh.bounds(), 128, &mut rng);
         let hits: Vec<_> = rays.iter().map(|r| tree.intersect(&mesh, r)).collect();
