@@ -9,6 +9,7 @@
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
+//!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT)
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
@@ -64,7 +65,24 @@ fn grid_build(data: &MeshData) -> (TriMesh, UniformGrid) {
 
 #[inline(never)]
 fn kd_build(mesh: &TriMesh) -> KdTree {
-    KdTree::build(mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap()
+    KdTree::build(mesh, &kd_params(), &mut MemoryBudget::new(0)).unwrap()
+}
+
+/// The default kd-tree parameters, or those `KD_CI` (intersection cost), `KD_BONUS` (empty bonus)
+/// and `KD_EXACT` (exact split below) set (to try trees of other quality without a rebuild).
+fn kd_params() -> KdTreeParams {
+    let var = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<f32>().ok());
+    let mut p = KdTreeParams::DEFAULT;
+    if let Some(x) = var("KD_CI") {
+        p.intersection_cost = x;
+    }
+    if let Some(x) = var("KD_BONUS") {
+        p.empty_bonus = x;
+    }
+    if let Some(x) = var("KD_EXACT") {
+        p.exact_below = x as u32;
+    }
+    p
 }
 
 /// The default grid parameters, or the density `GRID_DENSITY` sets (to try other densities
