@@ -126,10 +126,11 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// 18.5 ns, a test 1.16 and 1.25); this is the first. The kd-tree's build is one term, 30.5 ns per
 /// N·log2 N (the median over the scenes): fitted with a second term per grid reference per
 /// triangle as well (5.1 + 6.4 per reference), least squares pulled towards the cheap Sierpinski
-/// tetrahedra and the dear slivers and predicted 0.51–0.75× the build on 26 of the evaluation's 31
-/// scenes (median error 37 %, the evaluation's measured builds, out of sample for most), where the
-/// one term is off by a median 12 % (0.10 on slivers-2k and 0.50 on hair-50k, whose kd-trees are
-/// slower per ray than the grid anyway, and 2.1 on the tetrahedra). Until stop 23 the build was
+/// tetrahedra and the dear slivers and predicted 0.58–0.76× the build on 19 of 29 of the
+/// evaluation's scenes (median error 32 %, against the builds measured by the evaluation that
+/// docs/evaluation.md holds, out of sample for most), where the one term is off by a median 14 %
+/// (0.12 on slivers-2k and 0.61 on hair-50k, whose kd-trees are slower per ray than the grid
+/// anyway, and 2.4–2.5 on the tetrahedra). Until stop 23 the build was
 /// 16.0 ns per N·log2 N per grid reference per triangle. The kd-tree per ray is 115.9 ns plus 5.5
 /// per grid cell and 1.9 per grid test; it follows the rays (a camera inside a building makes both
 /// structures' estimates grow). The grid and the kd-tree are within a few percent per ray on many

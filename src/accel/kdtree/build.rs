@@ -11,7 +11,7 @@
 //!   child holds only triangles that really enter it and bounds of their parts.
 //! - **Cost**: `C_t + C_i·(P_L·⌈N_L/4⌉ + P_R·⌈N_R/4⌉)` (times `1 − empty_bonus` when a child is
 //!   empty): the list test takes a leaf's triangles four at a time, so one to four cost the same.
-//! - **Termination** (pbrt's rule): a split no better than a leaf is still taken, as a "bad refine",
+//! - **Termination** (after pbrt's): a split no better than a leaf is still taken, as a "bad refine",
 //!   when the path from the root had fewer than three and the node has more than 64 triangles, or
 //!   more than 8 and the split costs at most 1.05 times the leaf; after both children are built, a
 //!   subtree no cheaper than a leaf of its node's triangles is retracted into that leaf (Mitsuba).
@@ -50,21 +50,28 @@ const BINS: usize = 32;
 
 /// A node of at most this many triangles (two blocks of the list test) whose best split is no
 /// cheaper than a leaf becomes that leaf: below it, the subtree of a bad refine was nearly always
-/// torn down again after being built (stop 19, docs/performance.md).
+/// torn down again after being built (docs/performance.md, "A faster kd-tree build (issue 12, branch
+/// hkd)", step 4).
 const NO_BAD_REFINE: usize = 8;
 
 /// A node of at most this many triangles takes a bad refine only when its best split costs at most
 /// [`NEAR_TIE`] times a leaf. The subtrees of worse bad refines there were nearly always built and
 /// torn down again: with bad refines down to 9 triangles, the work in retracted subtrees was 7 % of
 /// bunny's build, 14 % of sibenik's, 27 % of spd_teapot's, 38 % of gears-10k's, 36 % of hair-50k's,
-/// and of the small nodes' bad refines that were kept, none cost 40 % more than a leaf and most
-/// within 5 %. Near ties keep the trees that need them (the Sierpinski tetrahedron's is unchanged:
+/// and of the small nodes' bad refines that were kept, none cost 40 % more than a leaf and more of
+/// them cost within 5 % than in any other 5 % bin. Near ties keep the trees that need them (the
+/// Sierpinski tetrahedron's is unchanged:
 /// without any bad refine below 64 it tests 2.6× the triangles a ray). Measured against every bad
 /// refine (29 scenes, docs/performance.md, "Stop 24"): the builds take 0.43–0.93× the time
 /// (geometric mean 0.67) for 0.98× the time per ray, the trees a little smaller (bunny 2.13 → 1.97
-/// references per triangle), though 1–4 % more instructions per ray. Larger nodes keep every bad
-/// refine: triangles spanning the box at all angles (slivers) need several splits before any one
-/// pays, and without a bad refine at the root their scene is one leaf (3.2× the time per ray).
+/// references per triangle), though 0–1.5 % more instructions per ray. Kept bad refines that would
+/// have paid at 1.05–1.4 times a leaf are lost (a sphere at a 10⁷ offset, whose few distinct
+/// triangles made leaves of 12, is one leaf of 48: 0.7× the rays per second, docs/robustness.md).
+/// The threshold is relative to the costs it was measured with (`KdTreeParams::DEFAULT`): with a
+/// cheaper test (`C_i` = 0.35) the tetrahedron's splits no longer come within it. Larger nodes
+/// keep every bad refine: triangles spanning the box at all angles (slivers) need several splits
+/// before any one pays, and without a bad refine at the root their scene is one leaf (3.2× the
+/// time per ray).
 const SMALL_NODE: usize = 64;
 
 /// See [`SMALL_NODE`].
