@@ -213,14 +213,12 @@ impl TriangleTest for AnyKernel<'_> {
         self.1.map_or(true, |a| a.accept(prim, hit))
     }
 
+    // The kernels' own filters (inlined here), so the unfiltered case is decided in one place.
     #[inline(never)]
     fn survivors(&self, block: &Block4) -> u32 {
-        if !self.0.filter_ok {
-            return 0b1111;
-        }
         macro_rules! survivors {
             ($kz:expr, $swap:expr) => {
-                filter::survivors::<lanes::F4, $kz, $swap>(&self.2, block)
+                Kernel::<$kz, $swap>(self.0, self.1, self.2).survivors(block)
             };
         }
         with_axes!(self.0, survivors)

@@ -312,14 +312,24 @@ fn fill_lists(
     // Every lane starts unused, so the gap lanes at the end of each list need no pass of their own.
     let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
     scatter_ids(members, kept, counts, ids.as_flattened_mut());
-    let mut tris = match budget.vec::<Block4>(blocks, "triangle packs") {
-        Ok(t) => t,
+    match gather_blocks(mesh, &ids, budget) {
+        Ok(tris) => Ok(Lists::Packed { ids, tris }),
         Err(e) => {
             budget.free(ids);
-            return Err(e);
+            Err(e)
         }
-    };
+    }
+}
+
+/// The triangles of `ids` copied beside them, a block per four ids (gap lanes `Hit::INVALID_ID`
+/// give NaN lanes), charged to `budget`.
+pub(super) fn gather_blocks(
+    mesh: &TriMesh,
+    ids: &[[u32; 4]],
+    budget: &mut MemoryBudget,
+) -> Result<Vec<Block4>, BuildError> {
+    let mut tris = budget.vec::<Block4>(ids.len(), "triangle packs")?;
     let all = mesh.triangles();
     tris.extend(ids.iter().map(|&four| Block4::gather(all, four)));
-    Ok(Lists::Packed { ids, tris })
+    Ok(tris)
 }

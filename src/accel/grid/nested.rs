@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use alloc::vec::Vec;
 
-use super::build::Members;
+use super::build::{gather_blocks, Members};
 use super::layout::Shape;
 use super::{GridParams, Lists, UniformGrid};
 use crate::budget::MemoryBudget;
@@ -122,7 +122,8 @@ fn largest_tested(grid: &UniformGrid) -> usize {
 }
 
 /// The nested grid (at `depth`, with its own nested grids) of `cell` when its list holds at least
-/// [`NESTED_MIN`] triangles and the grid pays, else `None`.
+/// [`NESTED_MIN`] triangles, at most half of them larger than the cell, and the grid pays, else
+/// `None`.
 fn nest_cell(
     grid: &UniformGrid,
     cell: usize,
@@ -241,7 +242,7 @@ fn nest_small(
     for (lane, &p) in large_ids.as_flattened_mut().iter_mut().zip(large_list) {
         *lane = p;
     }
-    let mut large = match budget.vec::<Block4>(blocks, "triangle packs") {
+    let large = match gather_blocks(mesh, &large_ids, budget) {
         Ok(v) => v,
         Err(e) => {
             sub.release(budget);
@@ -249,8 +250,6 @@ fn nest_small(
             return Err(e);
         }
     };
-    let tris = mesh.triangles();
-    large.extend(large_ids.iter().map(|&four| Block4::gather(tris, four)));
     let mut nested = Nested {
         cell,
         grid: sub,
@@ -291,7 +290,9 @@ fn pays(sub: &UniformGrid, large: usize, n: usize) -> bool {
     }
     let share = f64::from(a / whole);
     // A cell step's price in listed triangles, from the built-in calibration's grid prices (the
-    // selector's cost model; 14 at stop 23). A build decides this before any calibration is known.
+    // selector's cost model; 14.0 at stop 23, 14.6 since stop 24's refit, which changed no nesting
+    // decision on the bundled and procedural scenes). A build decides this before any calibration
+    // is known.
     let calibration = Calibration::builtin();
     let cell_in_tests = calibration.value(2) / calibration.value(3);
     let crossing = (sub.references as f64 + cell_in_tests * sub.cell_count() as f64) * share;
