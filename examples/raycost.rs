@@ -172,7 +172,7 @@ fn main() {
         let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
         if mode == "kdbuild" {
             let mut t = Vec::new();
-            let mut shape = (0, 0, 0, 0);
+            let mut shape = (0, 0, 0, 0, 0);
             for _ in 0..reps {
                 let t0 = Instant::now();
                 let tree = kd_build(&mesh);
@@ -182,18 +182,20 @@ fn main() {
                     tree.reference_count(),
                     tree.node_count(),
                     tree.largest_leaf(),
+                    tree.memory_bytes(),
                 );
                 drop(std::hint::black_box(tree));
             }
             let n = mesh.len() as f64;
             println!(
-                "{name:>16} N {:>8} kd build {:8.2} ms work/tri {:5.1} refs/tri {:4.2} nodes {} largest leaf {}",
+                "{name:>16} N {:>8} kd build {:8.2} ms work/tri {:5.1} refs/tri {:4.2} nodes {} largest leaf {} bytes/tri {:.0}",
                 mesh.len(),
                 median(t) * 1e3,
                 shape.0 as f64 / n,
                 shape.1 as f64 / n,
                 shape.2,
-                shape.3
+                shape.3,
+                shape.4 as f64 / n
             );
             continue;
         }
