@@ -164,7 +164,7 @@ pub const KD_NODE_PER_CELL_STEP: f64 = 0.05;
 /// the library's sample rays' counted work on both structures against the measured per-ray times of
 /// the evaluation's workload, thread CPU; docs/design.md, "Selector"; docs/evaluation.md searches
 /// them again on every run). Refitted at stop 25 for the shallower kd-trees of the smaller
-/// empty-space bonus, which are faster than the grid per ray on 24 of the 31 scenes: with 0.05 and
+/// empty-space bonus, which are faster than the grid per ray on 22–24 of the 31 scenes: with 0.05 and
 /// 1.75 the check keeps the faster structure on 27 of 31 (leave-one-out 24; summed loss 0.16,
 /// leave-one-out 0.59), where stop 19's 0.35 and 1.4 kept it on 19 (loss 1.13: they dropped the
 /// kd-trees of fandisk, teapot, sphereflake-1k, gears and stadium-1M, 12–30 % faster). A fixed
