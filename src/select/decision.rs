@@ -221,12 +221,17 @@ pub fn kd_tree_confirmed_at(
 /// 15 on slivers, whose kd-trees duplicate triangles at every level and trace 2× slower than the
 /// grid. 5 stops those builds at 35–75 % of their work with room above the rest. Re-measured at
 /// stop 19 with the costs chosen by time: 1.2–2.7 on the worthwhile trees, 3.6 on hair (whose build
-/// now completes and is dropped by the check after it), 10–15 on slivers.
-pub const KD_WORK_PER_N_LOG_N: f64 = 5.0;
+/// now completes and is dropped by the check after it), 10–15 on slivers. Re-measured at stop 25
+/// (the build without most bad refines, the smaller empty-space bonus; `raycost kdbuild`): 0.99–2.01
+/// on all 29 scenes measured but slivers-2k (8.2), hair-50k the highest; 3 leaves 1.5× room and stops
+/// a sliver build at 37–45 % of its work instead of 61–71 % (less lost on a trial that the estimate
+/// thought cheap).
+pub const KD_WORK_PER_N_LOG_N: f64 = 3.0;
 
 /// The floor of [`kd_tree_work_limit`] per triangle, so that tiny scenes (where `log2 N` is near 0)
-/// are never abandoned: more than any measured scene's work per triangle but slivers' and hair's.
-pub const KD_WORK_FLOOR_PER_TRIANGLE: f64 = 64.0;
+/// are never abandoned: more than any measured scene's work per triangle but slivers' (stop 25:
+/// 13–31 on the others, hair-50k's 31.3 the most; 64 until then).
+pub const KD_WORK_FLOOR_PER_TRIANGLE: f64 = 40.0;
 
 /// The work (items held by the build's nodes, summed) after which the selector abandons a kd-tree
 /// it builds on an estimate, for `triangles` non-degenerate triangles: such a build is one whose
