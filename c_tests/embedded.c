@@ -139,9 +139,9 @@ static rq_status build_and_trace(const rq_mesh_desc *d, rq_structure structure, 
     memset(&r, 0, sizeof r);
     r.struct_size = (uint32_t)sizeof r;
     CHECK_STATUS(rq_scene_report_get(scene, &r), RQ_STATUS_OK);
-    /* AUTO holds whichever structure its check kept (the cube's kd-tree, at this budget, since stop 25). */
-    CHECK(structure == RQ_STRUCTURE_AUTO ? (r.structure == RQ_STRUCTURE_GRID || r.structure == RQ_STRUCTURE_KDTREE)
-                                         : r.structure == structure);
+    /* AUTO at this budget keeps the cube's kd-tree (since stop 25's check; the grid until then). */
+    CHECK(r.structure == (structure == RQ_STRUCTURE_GRID ? RQ_STRUCTURE_GRID : RQ_STRUCTURE_KDTREE));
+    CHECK(structure != RQ_STRUCTURE_AUTO || r.outcome == RQ_OUTCOME_ABOVE_BREAK_EVEN);
     CHECKF(the_arena.live_bytes >= r.memory_bytes, "arena holds %zu bytes, the scene says %zu", the_arena.live_bytes,
            r.memory_bytes);
   }

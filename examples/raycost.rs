@@ -27,6 +27,28 @@ use rayq::mesh::MeshData;
 use rayq::workload::{bounce_rays, camera_rays, SplitMix64};
 use rayq::{GridParams, KdTree, KdTreeParams, MemoryBudget, Ray, TriMesh, UniformGrid};
 
+/// What `kdbuild` prints of a tree besides its build time.
+#[derive(Clone, Copy, Default)]
+struct TreeShape {
+    work: u64,
+    references: usize,
+    nodes: usize,
+    largest_leaf: usize,
+    bytes: usize,
+}
+
+impl TreeShape {
+    fn of(tree: &KdTree) -> TreeShape {
+        TreeShape {
+            work: tree.build_work(),
+            references: tree.reference_count(),
+            nodes: tree.node_count(),
+            largest_leaf: tree.largest_leaf(),
+            bytes: tree.memory_bytes(),
+        }
+    }
+}
+
 fn load(name: &str) -> Option<MeshData> {
     let root = env!("CARGO_MANIFEST_DIR");
     for dir in [format!("{root}/../shared/scenes"), format!("{root}/scenes")] {
@@ -172,30 +194,25 @@ fn main() {
         let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
         if mode == "kdbuild" {
             let mut t = Vec::new();
-            let mut shape = (0, 0, 0, 0, 0);
+            let mut last = None;
             for _ in 0..reps {
                 let t0 = Instant::now();
                 let tree = kd_build(&mesh);
                 t.push(t0.elapsed().as_secs_f64());
-                shape = (
-                    tree.build_work(),
-                    tree.reference_count(),
-                    tree.node_count(),
-                    tree.largest_leaf(),
-                    tree.memory_bytes(),
-                );
+                last = Some(TreeShape::of(&tree));
                 drop(std::hint::black_box(tree));
             }
+            let shape = last.unwrap_or_default();
             let n = mesh.len() as f64;
             println!(
                 "{name:>16} N {:>8} kd build {:8.2} ms work/tri {:5.1} refs/tri {:4.2} nodes {} largest leaf {} bytes/tri {:.0}",
                 mesh.len(),
                 median(t) * 1e3,
-                shape.0 as f64 / n,
-                shape.1 as f64 / n,
-                shape.2,
-                shape.3,
-                shape.4 as f64 / n
+                shape.work as f64 / n,
+                shape.references as f64 / n,
+                shape.nodes,
+                shape.largest_leaf,
+                shape.bytes as f64 / n
             );
             continue;
         }

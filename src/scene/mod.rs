@@ -512,7 +512,7 @@ impl Scene {
     /// switches to the kd-tree when the remaining budget is at least W* (or the trial workload,
     /// where the build costs at most `select::decision::TRIAL_SHARE` of tracing those rays on the
     /// grid), or, with the budget still unknown, once the excess paid on the grid reaches the
-    /// kd-tree's build cost (or the grid has cost that build 32 times over) (and, under an
+    /// kd-tree's build cost (or the grid has cost that build `TRIAL_SHARE⁻¹` times over) (and, under an
     /// upper bound, the rays that may still come are at least W*). After [`RAYS_REMAINING_NONE`]
     /// it never switches.
     ///

@@ -123,16 +123,17 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// ray); `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
 /// since stop 20). Two runs of 9 repeats gave constants within 2 % of each other (a cell 14.7 and
-/// 14.4 ns, a kd-tree build 23.9 and 24.2 ns per N·log2 N); this is the first. Every constant came
-/// out 15–26 % below stop 24's, the grid's too (unchanged code): the machine ran faster that day,
-/// which W* (a ratio of these constants) does not see. The kd-tree's build is one term, 23.9 ns per
+/// 14.4 ns, a kd-tree build 23.9 and 24.2 ns per N·log2 N); this is the first. The grid's constants
+/// and both builds came out 14–26 % below stop 24's (the grid's code unchanged: the machine ran
+/// faster that day, which W*, a ratio of these constants, does not see); the kd-tree's per-ray
+/// terms 15–37 % (per grid cell 5.5 → 3.5), as its trees changed. The kd-tree's build is one term, 23.9 ns per
 /// N·log2 N (the median over the scenes): at stop 24, fitted with a second term per grid reference
 /// per triangle as well (5.1 + 6.4 per reference), least squares pulled towards the cheap Sierpinski
 /// tetrahedra and the dear slivers and predicted 0.58–0.76× the build on 19 of 29 of the
 /// evaluation's scenes (median error 32 %, against the builds measured by the evaluation that
-/// docs/evaluation.md holds, out of sample for most), where the one term is off by a median 14 %
-/// (0.12 on slivers-2k and 0.61 on hair-50k, whose kd-trees are slower per ray than the grid
-/// anyway, and 2.4–2.5 on the tetrahedra). Until stop 23 the build was
+/// docs/evaluation.md then held, out of sample for most), where the one term was off by a median
+/// 14 % (0.12 on slivers-2k and 0.61 on hair-50k, whose kd-trees are slower per ray than the grid
+/// anyway, and 2.4–2.5 on the tetrahedra; all stop 24's figures). Until stop 23 the build was
 /// 16.0 ns per N·log2 N per grid reference per triangle. The kd-tree per ray is 94.3 ns plus 3.5
 /// per grid cell and 1.6 per grid test; it follows the rays (a camera inside a building makes both
 /// structures' estimates grow). The grid and the kd-tree are within a few percent per ray on many

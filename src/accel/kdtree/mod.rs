@@ -63,7 +63,7 @@ impl KdTreeParams {
     /// leaves unused on well-shaped scenes. The costs were chosen by time, not by instructions: a
     /// node step costs more than its ~33 instructions (the nodes of a deep tree miss the cache),
     /// and over the evaluation's scenes (29, one thread, timed per ray and per build against
-    /// `C_i = 1`, bonus 0.8, in two runs) this setting traced 4–5 % faster and built 16–17 %
+    /// `C_i = 1`, bonus 0.8, in two runs at stop 19, with bonus 0.5) this setting traced 4–5 % faster and built 16–17 %
     /// faster (geometric means; hair 1.7× faster per ray, soup 1.18×; a few small scenes up to
     /// 9 % slower); docs/performance.md, "kd-tree costs by time".
     pub const DEFAULT: KdTreeParams = KdTreeParams {
@@ -79,15 +79,16 @@ impl KdTreeParams {
 
     /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
     /// with bigger leaves (measured against the default at stop 19, both with the exact split up
-    /// to 16 triangles: 0.75× its build time, 4.7 % slower per ray in the geometric mean, up to
+    /// to 16 triangles and bonus 0.5: 0.75× its build time, 4.7 % slower per ray in the geometric mean, up to
     /// 1.3× on gears-10k).
     pub const FAST: KdTreeParams = KdTreeParams {
         intersection_cost: 0.25,
         ..KdTreeParams::DEFAULT
     };
 
-    /// A better tree for many rays: the exact sweep up to 1 024 triangles (measured: 2–4 % fewer
-    /// instructions per ray than the default, for up to 2.1× its build).
+    /// A better tree for many rays: the exact sweep up to 1 024 triangles (measured with bonus 0.5:
+    /// 2–4 % fewer instructions per ray than the default, for up to 2.1× its build; at stop 24,
+    /// 1.003× the time per ray for 2.68× the build).
     pub const HIGH: KdTreeParams = KdTreeParams {
         exact_below: 1024,
         ..KdTreeParams::DEFAULT
