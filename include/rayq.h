@@ -117,6 +117,30 @@ typedef uint32_t rq_budget_kind;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
+// The kd-tree's build quality (`uint32_t`): the build time traded against the time per ray. The
+// selector's estimates assume DEFAULT; the other two change only the trees it or the caller builds.
+enum rq_kd_quality
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  // The library's tree (`KdTreeParams::DEFAULT`): binned SAH, costs chosen by time.
+  RQ_KD_QUALITY_DEFAULT = 0,
+  // A faster build for few rays (`KdTreeParams::FAST`: tests priced at half the default, so
+  // shallower trees with bigger leaves; docs/performance.md, "Stop 25", for its figures).
+  RQ_KD_QUALITY_FAST = 1,
+  // The exact SAH sweep up to 1 024 triangles a node (`KdTreeParams::HIGH`): a longer build for
+  // about the same tree on well-shaped scenes (docs/performance.md, "Stop 25").
+  RQ_KD_QUALITY_HIGH = 2,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum rq_kd_quality rq_kd_quality;
+#else
+typedef uint32_t rq_kd_quality;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
 // Why the scene uses its structure (`uint32_t`).
 enum rq_outcome
 #if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
@@ -338,6 +362,8 @@ typedef struct rq_build_options {
   void *memory_monitor_user;
   // Whether `expected_rays` is the count (EXPECTED, default) or an upper bound (AT_MOST).
   rq_budget_kind budget_kind;
+  // The quality of any kd-tree the scene builds (DEFAULT, FAST, HIGH), forced or chosen by AUTO.
+  rq_kd_quality kd_quality;
 } rq_build_options;
 
 #if defined(RQ_WITH_OBJ)

@@ -35,6 +35,7 @@ const RUN_TESTS: &[&str] = &[
     "embedded",
     "geometries",
     "hostile_mesh",
+    "kd_quality",
     "lifecycle",
     "memory_monitor",
     "obj",
@@ -365,6 +366,11 @@ fn c_hostile_mesh() {
 #[test]
 fn c_budget() {
     run_c_test("budget");
+}
+
+#[test]
+fn c_kd_quality() {
+    run_c_test("kd_quality");
 }
 
 #[test]

@@ -7,6 +7,7 @@ use glam::Vec3;
 
 use super::types::*;
 use super::{boundary, Message};
+use crate::accel::kdtree::KdTreeParams;
 use crate::budget::{try_box, MemoryMonitor};
 use crate::error::{BuildError, MeshError};
 use crate::mesh::MeshSource;
@@ -40,6 +41,7 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
                 memory_monitor: None,
                 memory_monitor_user: ptr::null_mut(),
                 budget_kind: rq_budget_kind::RQ_BUDGET_EXPECTED,
+                kd_quality: rq_kd_quality::RQ_KD_QUALITY_DEFAULT,
             })
         }
     })
@@ -50,6 +52,7 @@ struct Options {
     structure: Structure,
     expected_rays: u64,
     budget_kind: BudgetKind,
+    kd_quality: rq_kd_quality,
     memory_limit: usize,
     sample_rays: *const rq_ray,
     sample_ray_count: usize,
@@ -76,6 +79,7 @@ unsafe fn read_options(
         structure: Structure::Auto,
         expected_rays: 0,
         budget_kind: BudgetKind::Expected,
+        kd_quality: rq_kd_quality::RQ_KD_QUALITY_DEFAULT,
         memory_limit: 0,
         sample_rays: ptr::null(),
         sample_ray_count: 0,
@@ -119,6 +123,19 @@ unsafe fn read_options(
             return Err((
                 rq_status::RQ_STATUS_INVALID_ARGUMENT,
                 "rq_build_options.budget_kind is not an rq_budget_kind value",
+                o,
+            ))
+        }
+    };
+    let kd_quality: u32 = read_covered!(p, size, kd_quality, u32, 0);
+    o.kd_quality = match kd_quality {
+        0 => rq_kd_quality::RQ_KD_QUALITY_DEFAULT,
+        1 => rq_kd_quality::RQ_KD_QUALITY_FAST,
+        2 => rq_kd_quality::RQ_KD_QUALITY_HIGH,
+        _ => {
+            return Err((
+                rq_status::RQ_STATUS_INVALID_ARGUMENT,
+                "rq_build_options.kd_quality is not an rq_kd_quality value",
                 o,
             ))
         }
@@ -333,6 +350,11 @@ pub(super) unsafe fn build_scene(
         structure: o.structure,
         expected_rays: o.expected_rays,
         budget_kind: o.budget_kind,
+        kdtree: match o.kd_quality {
+            rq_kd_quality::RQ_KD_QUALITY_DEFAULT => KdTreeParams::DEFAULT,
+            rq_kd_quality::RQ_KD_QUALITY_FAST => KdTreeParams::FAST,
+            rq_kd_quality::RQ_KD_QUALITY_HIGH => KdTreeParams::HIGH,
+        },
         memory_limit: o.memory_limit,
         memory_monitor: o.memory_monitor,
         ..BuildOptions::DEFAULT

@@ -72,6 +72,21 @@ pub enum rq_budget_kind {
     RQ_BUDGET_AT_MOST = 1,
 }
 
+/// The kd-tree's build quality (`uint32_t`): the build time traded against the time per ray. The
+/// selector's estimates assume DEFAULT; the other two change only the trees it or the caller builds.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum rq_kd_quality {
+    /// The library's tree (`KdTreeParams::DEFAULT`): binned SAH, costs chosen by time.
+    RQ_KD_QUALITY_DEFAULT = 0,
+    /// A faster build for few rays (`KdTreeParams::FAST`: tests priced at half the default, so
+    /// shallower trees with bigger leaves; docs/performance.md, "Stop 25", for its figures).
+    RQ_KD_QUALITY_FAST = 1,
+    /// The exact SAH sweep up to 1 024 triangles a node (`KdTreeParams::HIGH`): a longer build for
+    /// about the same tree on well-shaped scenes (docs/performance.md, "Stop 25").
+    RQ_KD_QUALITY_HIGH = 2,
+}
+
 /// Why the scene uses its structure (`uint32_t`).
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -171,6 +186,8 @@ pub struct rq_build_options {
     pub memory_monitor_user: *mut c_void,
     /// Whether `expected_rays` is the count (EXPECTED, default) or an upper bound (AT_MOST).
     pub budget_kind: rq_budget_kind,
+    /// The quality of any kd-tree the scene builds (DEFAULT, FAST, HIGH), forced or chosen by AUTO.
+    pub kd_quality: rq_kd_quality,
 }
 
 /// Memory monitor: told the bytes a build would hold after the allocation it is about to make;

@@ -78,17 +78,17 @@ impl KdTreeParams {
     };
 
     /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
-    /// with bigger leaves (measured against the default at stop 19, both with the exact split up
-    /// to 16 triangles and bonus 0.5: 0.75× its build time, 4.7 % slower per ray in the geometric mean, up to
-    /// 1.3× on gears-10k).
+    /// with bigger leaves (stop 25, against the default on 29 scenes: 0.75× its build time (0.64–0.81),
+    /// 1.7 % slower per ray in the geometric mean, up to 12 % on the Sierpinski tetrahedra; at
+    /// stop 19, with the exact split up to 16 triangles and bonus 0.5: 0.75× and 4.7 %).
     pub const FAST: KdTreeParams = KdTreeParams {
         intersection_cost: 0.25,
         ..KdTreeParams::DEFAULT
     };
 
-    /// A better tree for many rays: the exact sweep up to 1 024 triangles (measured with bonus 0.5:
-    /// 2–4 % fewer instructions per ray than the default, for up to 2.1× its build; at stop 24,
-    /// 1.003× the time per ray for 2.68× the build).
+    /// A better tree for many rays: the exact sweep up to 1 024 triangles (stop 25, against the
+    /// default on 29 scenes: 2.7× its build time (1.6–4.2), 0.977× the time per ray in the
+    /// geometric mean, 0.91–1.03 per scene; at stop 24, with bonus 0.5, 1.003× for 2.68×).
     pub const HIGH: KdTreeParams = KdTreeParams {
         exact_below: 1024,
         ..KdTreeParams::DEFAULT
