@@ -79,7 +79,8 @@ impl KdTreeParams {
 
     /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
     /// with bigger leaves (stop 25, against the default on 29 scenes: 0.75× its build time (0.64–0.81),
-    /// 1.7 % slower per ray in the geometric mean, up to 12 % on the Sierpinski tetrahedra; at
+    /// 1.7–2.3 % slower per ray in the geometric mean (two runs), up to 12 % on the Sierpinski
+    /// tetrahedra; at
     /// stop 19, with the exact split up to 16 triangles and bonus 0.5: 0.75× and 4.7 %).
     pub const FAST: KdTreeParams = KdTreeParams {
         intersection_cost: 0.25,
@@ -87,8 +88,8 @@ impl KdTreeParams {
     };
 
     /// A better tree for many rays: the exact sweep up to 1 024 triangles (stop 25, against the
-    /// default on 29 scenes: 2.7× its build time (1.6–4.2), 0.977× the time per ray in the
-    /// geometric mean, 0.91–1.03 per scene; at stop 24, with bonus 0.5, 1.003× for 2.68×).
+    /// default on 29 scenes: 2.7× its build time (1.6–4.2), 0.977–0.984× the time per ray in the
+    /// geometric mean (two runs), 0.91–1.03 per scene; at stop 24, with bonus 0.5, 1.003× for 2.68×).
     pub const HIGH: KdTreeParams = KdTreeParams {
         exact_below: 1024,
         ..KdTreeParams::DEFAULT
