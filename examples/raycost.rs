@@ -10,6 +10,7 @@
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
 //!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT)
+//!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
@@ -125,16 +126,150 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// Every `k`-th triangle of `data` (the same vertices).
+fn every_kth(data: &MeshData, k: usize) -> MeshData {
+    MeshData {
+        vertices: data.vertices.clone(),
+        indices: data.indices.iter().step_by(k.max(1)).copied().collect(),
+    }
+}
+
+/// What `probe` keeps of one scene for the summary: the measured kd/grid time per ray and three
+/// predictions of it, and the kd-tree's build time with two predictors of it.
+struct Probe {
+    ray_ratio: [f64; 4],
+    build_ms: f64,
+    build_predictors: [f64; 2],
+}
+
+/// `|ln(prediction / truth)|` per scene, the prediction `c·x` with `c` fitted on the other scenes
+/// (median ratio, leave-one-out).
+fn loo_log_errors(x: &[f64], y: &[f64]) -> Vec<f64> {
+    (0..x.len())
+        .map(|i| {
+            let others: Vec<f64> = (0..x.len())
+                .filter(|&j| j != i)
+                .map(|j| (y[j] / x[j]).ln())
+                .collect();
+            let c = if others.is_empty() {
+                0.0
+            } else {
+                median(others)
+            };
+            (c + x[i].ln() - y[i].ln()).abs()
+        })
+        .collect()
+}
+
+/// `probe`: the selector's default sample rays through the full kd-tree and grid and through those
+/// of every 16th triangle (at least 1 024), counted work priced by stop 25's per-ray fit, against
+/// the measured time per ray of the workload; and the kd-tree's build against `N·log2 N` and
+/// against the sampled tree's build scaled by `N·log2 N / (N'·log2 N')`.
+fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
+    use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
+    let kd_ns = |nodes: f64, tests: f64| 6.8 + 10.0 * nodes + 1.14 * tests;
+    let grid_ns = |cells: f64, tests: f64| 75.9 + 20.9 * cells + 0.77 * tests;
+    let nlogn = |n: usize| n as f64 * (n.max(2) as f64).log2();
+    let timed_build = |m: &TriMesh| {
+        let mut t = Vec::new();
+        let mut tree = None;
+        for _ in 0..reps {
+            let t0 = Instant::now();
+            tree = Some(kd_build(m));
+            t.push(t0.elapsed().as_secs_f64() * 1e3);
+        }
+        (median(t), tree.unwrap())
+    };
+    let (build_ms, tree) = timed_build(mesh);
+    let grid = UniformGrid::build(mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
+    let (mut kd, mut gr) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let t = Instant::now();
+        std::hint::black_box(kd_trace(&tree, mesh, rays));
+        kd.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        std::hint::black_box(grid_trace(&grid, mesh, rays));
+        gr.push(t.elapsed().as_secs_f64());
+    }
+    let p = SampleParams::DEFAULT;
+    let (g, k) = (
+        sample_grid(&grid, mesh, None, &p),
+        sample_kdtree(&tree, mesh, None, &p),
+    );
+    let est = rayq::Calibration::builtin().estimate(&g);
+    let every = 16.min((mesh.len() / 1024).max(1));
+    let sub_data = every_kth(data, every);
+    let sub = TriMesh::from_source(&sub_data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+    let (sub_ms, sub_tree) = timed_build(&sub);
+    let sub_grid = UniformGrid::build(&sub, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
+    let (sg, sk) = (
+        sample_grid(&sub_grid, &sub, None, &p),
+        sample_kdtree(&sub_tree, &sub, None, &p),
+    );
+    let ray_ratio = [
+        median(kd) / median(gr),
+        est.kd_ray_seconds / est.grid_ray_seconds,
+        kd_ns(k.cells_per_ray(), k.tests_per_ray()) / grid_ns(g.cells_per_ray(), g.tests_per_ray()),
+        kd_ns(sk.cells_per_ray(), sk.tests_per_ray())
+            / grid_ns(sg.cells_per_ray(), sg.tests_per_ray()),
+    ];
+    let scaled_sub = sub_ms * nlogn(mesh.len()) / nlogn(sub.len());
+    println!(
+        "{:>8} tris, sampled {:>6} | kd/grid per ray: measured {:.2}, model {:.2}, full counts {:.2}, sampled counts {:.2} | kd build {:7.2} ms, sampled {:6.3} ms ({:.1} %), scaled {:7.2}",
+        mesh.len(),
+        sub.len(),
+        ray_ratio[0],
+        ray_ratio[1],
+        ray_ratio[2],
+        ray_ratio[3],
+        build_ms,
+        sub_ms,
+        100.0 * sub_ms / build_ms,
+        scaled_sub
+    );
+    Probe {
+        ray_ratio,
+        build_ms,
+        build_predictors: [nlogn(mesh.len()), scaled_sub],
+    }
+}
+
+/// The medians (and largest) of `probe`'s errors over the scenes.
+fn probe_summary(probes: &[Probe]) {
+    let stats = |mut e: Vec<f64>| {
+        e.sort_by(f64::total_cmp);
+        (e[e.len() / 2], e[e.len() - 1])
+    };
+    for (i, what) in [(1, "model"), (2, "full counts"), (3, "sampled counts")] {
+        let (m, w) = stats(
+            probes
+                .iter()
+                .map(|p| (p.ray_ratio[i] / p.ray_ratio[0]).ln().abs())
+                .collect(),
+        );
+        println!("kd/grid per ray from the {what}: median |ln error| {m:.3}, largest {w:.3}");
+    }
+    let y: Vec<f64> = probes.iter().map(|p| p.build_ms).collect();
+    for (i, what) in [(0, "N log2 N"), (1, "the sampled tree's build, scaled")] {
+        let x: Vec<f64> = probes.iter().map(|p| p.build_predictors[i]).collect();
+        let (m, w) = stats(loo_log_errors(&x, &y));
+        println!("kd build from {what} (leave-one-out): median |ln error| {m:.3}, largest {w:.3}");
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(mode), Some(reps)) = (
         args.first(),
         args.get(1).and_then(|r| r.parse::<usize>().ok()),
     ) else {
-        eprintln!("usage: raycost kd|grid|time|stats|check|build|cold|kdbuild REPEATS SCENE...");
+        eprintln!(
+            "usage: raycost kd|grid|time|stats|check|probe|build|cold|kdbuild REPEATS SCENE..."
+        );
         std::process::exit(2);
     };
     let reps = reps.max(1);
+    let mut probes = Vec::new();
     for name in &args[2..] {
         let Some(data) = load(name) else {
             eprintln!("{name}: no such scene");
@@ -224,6 +359,11 @@ fn main() {
         let bounces = bounce_rays(&mesh, &rays, &hits, &mut rng);
         rays.extend(bounces);
         let n = rays.len() as f64;
+        if mode == "probe" {
+            print!("{name:>16} ");
+            probes.push(probe(&data, &mesh, &rays, reps));
+            continue;
+        }
         match mode.as_str() {
             "kd" => println!(
                 "{name} {} rays {}",
@@ -289,10 +429,13 @@ fn main() {
             }
             _ => {
                 eprintln!(
-                    "unknown mode {mode}: kd, grid, time, stats, check, build, cold or kdbuild"
+                    "unknown mode {mode}: kd, grid, time, stats, check, probe, build, cold or kdbuild"
                 );
                 std::process::exit(2);
             }
         }
+    }
+    if !probes.is_empty() {
+        probe_summary(&probes);
     }
 }
