@@ -9,7 +9,7 @@
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
-//!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT)
+//!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH)
 //!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
@@ -91,8 +91,9 @@ fn kd_build(mesh: &TriMesh) -> KdTree {
     KdTree::build(mesh, &kd_params(), &mut MemoryBudget::new(0)).unwrap()
 }
 
-/// The default kd-tree parameters, or those `KD_CI` (intersection cost), `KD_BONUS` (empty bonus)
-/// and `KD_EXACT` (exact split below) set (to try trees of other quality without a rebuild).
+/// The default kd-tree parameters, or those `KD_CI` (intersection cost), `KD_BONUS` (empty bonus),
+/// `KD_EXACT` (exact split below) and `KD_DEPTH` (depth limit) set (to try trees of other quality
+/// without a rebuild).
 fn kd_params() -> KdTreeParams {
     let var = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<f32>().ok());
     let mut p = KdTreeParams::DEFAULT;
@@ -104,6 +105,9 @@ fn kd_params() -> KdTreeParams {
     }
     if let Some(x) = var("KD_EXACT") {
         p.exact_below = x as u32;
+    }
+    if let Some(x) = var("KD_DEPTH") {
+        p.max_depth = x as u32;
     }
     p
 }

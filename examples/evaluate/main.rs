@@ -733,6 +733,45 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         "| the same with the grid's sample rays timed by the clock | {:.1} % | |",
         100.0 * median(&mut clock.clone())
     );
+    // What W* is made of, judged apart: the estimate's kd-tree / grid time per ray and its build
+    // (leave-one-out, the default sample rays), and how many scenes leave W* room to be within 20 %
+    // at all. With the ratio r = t_kd / t_grid known within a relative δ, W* = T / (t_grid·(1 − r))
+    // moves by about r·δ / (1 − r), at most 20 % only while r ≤ 0.2 / (δ + 0.2).
+    let default_side = side_index(0.0);
+    let mut ratio_err: Vec<f64> = results
+        .iter()
+        .zip(&loo_by_side[default_side])
+        .map(|(m, e)| {
+            let est = e.kd_ray_seconds / e.grid_ray_seconds;
+            (est / (m.obs.kd_ray_ns / m.obs.grid_ray_ns)).ln().abs()
+        })
+        .collect();
+    let mut build_err: Vec<f64> = results
+        .iter()
+        .zip(&loo_by_side[default_side])
+        .map(|(m, e)| (e.kd_build_seconds / (m.obs.kd_build_ns * 1e-9)).ln().abs())
+        .collect();
+    let delta = median(&mut ratio_err).exp() - 1.0;
+    let reachable = results
+        .iter()
+        .filter(|m| m.obs.kd_ray_ns / m.obs.grid_ray_ns <= 0.2 / (delta + 0.2))
+        .count();
+    let _ = writeln!(
+        md,
+        "| its parts: kd-tree / grid time per ray, median \\|ln(est / meas)\\|, leave-one-out | {:.3} | |",
+        median(&mut ratio_err)
+    );
+    let _ = writeln!(
+        md,
+        "| its parts: kd-tree build, median \\|ln(est / meas)\\|, leave-one-out | {:.3} | |",
+        median(&mut build_err)
+    );
+    let _ = writeln!(
+        md,
+        "| scenes whose measured kd/grid per ray (≤ {:.2}) leaves W* within 20 % reachable at that ratio error | {reachable} of {} | |",
+        0.2 / (delta + 0.2),
+        results.len()
+    );
     let _ = writeln!(md, "| regret (AUTO / oracle), geometric mean over scenes × budgets 10³..10⁸ | {:.3} | ≤ 1.03 |", geomean(&regrets));
     let _ = writeln!(
         md,
