@@ -9,7 +9,7 @@
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
-//!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH)
+//!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH, KD_INDEXED)
 //!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
@@ -92,8 +92,8 @@ fn kd_build(mesh: &TriMesh) -> KdTree {
 }
 
 /// The default kd-tree parameters, or those `KD_CI` (intersection cost), `KD_BONUS` (empty bonus),
-/// `KD_EXACT` (exact split below) and `KD_DEPTH` (depth limit) set (to try trees of other quality
-/// without a rebuild).
+/// `KD_EXACT` (exact split below), `KD_DEPTH` (depth limit) and `KD_INDEXED` (the indexed layout)
+/// set (to try other trees without a rebuild).
 fn kd_params() -> KdTreeParams {
     let var = |name: &str| std::env::var(name).ok().and_then(|v| v.parse::<f32>().ok());
     let mut p = KdTreeParams::DEFAULT;
@@ -108,6 +108,9 @@ fn kd_params() -> KdTreeParams {
     }
     if let Some(x) = var("KD_DEPTH") {
         p.max_depth = x as u32;
+    }
+    if std::env::var("KD_INDEXED").is_ok() {
+        p.layout = rayq::TriangleLayout::Indexed;
     }
     p
 }

@@ -371,19 +371,29 @@ struct Selector {
 }
 
 /// The total of choosing the kd-tree after `first` rays on the grid: its build, the check, and the
-/// rest of the rays on whichever structure the check leaves.
-fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64) -> f64 {
+/// rest of the rays on whichever structure the check leaves. With a known budget (`released`) the
+/// library releases the grid before the build and builds it again when the tree is abandoned or
+/// dropped by the check (src/scene/choose.rs); the online switch keeps the grid while it builds.
+fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64, released: bool) -> f64 {
     let (b, tg, tk) = (
         o.kd_build_ns * 1e-9,
         o.grid_ray_ns * 1e-9,
         o.kd_ray_ns * 1e-9,
     );
+    let rebuild = if released {
+        o.grid_build_ns * 1e-9
+    } else {
+        0.0
+    };
     if let Some(abandoned) = s.abandoned_s {
-        // Stopped at the work limit; the grid is built again (the known budget released it).
-        return first * tg + abandoned + o.grid_build_ns * 1e-9 + (r - first) * tg;
+        // Stopped at the work limit: the rest on the grid.
+        return first * tg + abandoned + rebuild + (r - first) * tg;
     }
-    let rest = if s.confirmed { tk } else { tg };
-    first * tg + b + s.check_s + (r - first) * rest
+    if s.confirmed {
+        first * tg + b + s.check_s + (r - first) * tk
+    } else {
+        first * tg + b + s.check_s + rebuild + (r - first) * tg
+    }
 }
 
 /// The strategies' totals, AUTO's with trial builds at `share` of the grid's estimated time (0: none).
@@ -395,7 +405,7 @@ fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64, share: 
     let auto_known = g
         + known.sample_s
         + if r >= known.estimate.build_rays_at(share) {
-            after_switch(o, known, 0.0, r)
+            after_switch(o, known, 0.0, r, true)
         } else {
             r * tg
         };
@@ -403,7 +413,7 @@ fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64, share: 
     let auto_unknown = g
         + unknown.sample_s
         + if r > switch {
-            after_switch(o, unknown, switch, r)
+            after_switch(o, unknown, switch, r, false)
         } else {
             r * tg
         };
