@@ -11,6 +11,7 @@
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
 //!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH, KD_INDEXED)
 //!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
+//!     target/release/examples/raycost floor 5                     # a query's fixed cost (one-triangle scene)
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
@@ -264,6 +265,56 @@ fn probe_summary(probes: &[Probe]) {
     }
 }
 
+/// `floor`: what a query costs beside its walk, on a scene of one triangle (both structures are a
+/// single leaf or cell): 100 000 rays from above that hit it, that enter its box and miss it, and
+/// that miss its box; ns per ray (medians of `reps`).
+fn floor(reps: usize) {
+    let data = MeshData {
+        vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
+        indices: vec![[0, 1, 2]],
+    };
+    let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
+    let tree = kd_build(&mesh);
+    let grid = UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
+    let mut rng = SplitMix64::new(11);
+    let mut unit = || rng.next_f32();
+    let aimed =
+        |origin: glam::Vec3, target: glam::Vec3| Ray::new(origin, (target - origin).normalize());
+    let (mut hit, mut inside, mut outside) = (Vec::new(), Vec::new(), Vec::new());
+    for _ in 0..100_000 {
+        let o = glam::Vec3::new(0.5 * unit(), 0.5 * unit(), 1.0 + unit());
+        let (a, b) = (0.5 * unit(), 0.5 * unit());
+        hit.push(aimed(o, glam::Vec3::new(a, b, 0.0)));
+        // In the box, past the hypotenuse.
+        inside.push(aimed(o, glam::Vec3::new(1.0 - 0.3 * a, 1.0 - 0.3 * b, 0.0)));
+        outside.push(aimed(
+            o + glam::Vec3::new(3.0, 0.0, 0.0),
+            glam::Vec3::new(3.0 + a, b, 0.0),
+        ));
+    }
+    for (what, rays) in [
+        ("hit", &hit),
+        ("enter the box, miss", &inside),
+        ("miss the box", &outside),
+    ] {
+        let (mut kd, mut gr) = (Vec::new(), Vec::new());
+        for _ in 0..reps {
+            let t = Instant::now();
+            std::hint::black_box(kd_trace(&tree, &mesh, rays));
+            kd.push(t.elapsed().as_secs_f64());
+            let t = Instant::now();
+            std::hint::black_box(grid_trace(&grid, &mesh, rays));
+            gr.push(t.elapsed().as_secs_f64());
+        }
+        let n = rays.len() as f64;
+        println!(
+            "{what:>20}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
+            median(kd) * 1e9 / n,
+            median(gr) * 1e9 / n
+        );
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(mode), Some(reps)) = (
@@ -271,11 +322,15 @@ fn main() {
         args.get(1).and_then(|r| r.parse::<usize>().ok()),
     ) else {
         eprintln!(
-            "usage: raycost kd|grid|time|stats|check|probe|build|cold|kdbuild REPEATS SCENE..."
+            "usage: raycost kd|grid|time|stats|check|probe|floor|build|cold|kdbuild REPEATS SCENE..."
         );
         std::process::exit(2);
     };
     let reps = reps.max(1);
+    if mode == "floor" {
+        floor(reps);
+        return;
+    }
     let mut probes = Vec::new();
     for name in &args[2..] {
         let Some(data) = load(name) else {
