@@ -11,7 +11,8 @@
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
 //!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH, KD_INDEXED)
 //!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
-//!     target/release/examples/raycost floor 5                     # a query's fixed cost (one-triangle scene)
+//!     target/release/examples/raycost floor 5                     # a query's fixed cost (one-triangle scene;
+//!                                                                 # Embree beside it with --features peers)
 //!     (`raycost::kd_build` and `raycost::grid_build` collect the builds' instructions)
 //!     valgrind --tool=callgrind --toggle-collect='raycost::kd_trace' \
 //!         target/release/examples/raycost kd 1 bunny              # instructions of kd-tree rays
@@ -21,6 +22,10 @@
 //! The instructions per ray are callgrind's total over the printed number of rays.
 
 use std::time::Instant;
+
+#[cfg(feature = "peers")]
+#[path = "../benches/shared/peer_structures.rs"]
+mod peer_structures;
 
 use rayq::accel::grid::GridWork;
 use rayq::accel::kdtree::KdWork;
@@ -307,11 +312,28 @@ fn floor(reps: usize) {
             gr.push(t.elapsed().as_secs_f64());
         }
         let n = rays.len() as f64;
-        println!(
+        print!(
             "{what:>20}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
             median(kd) * 1e9 / n,
             median(gr) * 1e9 / n
         );
+        #[cfg(feature = "peers")]
+        {
+            use peer_structures::{embree3, EmbreeDevice, Kind};
+            let device = EmbreeDevice::new().ok();
+            if let Ok(built) =
+                Kind::Embree(embree3::RTC_BUILD_QUALITY_MEDIUM).build(&data, device.as_ref())
+            {
+                let mut em = Vec::new();
+                for _ in 0..reps {
+                    let t = Instant::now();
+                    std::hint::black_box(built.count_hits(rays));
+                    em.push(t.elapsed().as_secs_f64());
+                }
+                print!(" Embree MEDIUM {:6.1} ns/ray", median(em) * 1e9 / n);
+            }
+        }
+        println!();
     }
 }
 
