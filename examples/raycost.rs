@@ -23,6 +23,8 @@
 
 use std::time::Instant;
 
+#[path = "../benches/shared/floor.rs"]
+mod floor;
 #[cfg(feature = "peers")]
 #[path = "../benches/shared/peer_structures.rs"]
 mod peer_structures;
@@ -270,38 +272,14 @@ fn probe_summary(probes: &[Probe]) {
     }
 }
 
-/// `floor`: what a query costs beside its walk, on a scene of one triangle (both structures are a
-/// single leaf or cell): 100 000 rays from above that hit it, that enter its box and miss it, and
-/// that miss its box; ns per ray (medians of `reps`).
+/// `floor`: what a query costs beside its walk (benches/shared/floor.rs), ns per ray (medians of
+/// `reps`), with Embree 3 MEDIUM beside it when built with `--features peers`.
 fn floor(reps: usize) {
-    let data = MeshData {
-        vertices: vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
-        indices: vec![[0, 1, 2]],
-    };
+    let data = floor::scene();
     let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
     let tree = kd_build(&mesh);
     let grid = UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
-    let mut rng = SplitMix64::new(11);
-    let mut unit = || rng.next_f32();
-    let aimed =
-        |origin: glam::Vec3, target: glam::Vec3| Ray::new(origin, (target - origin).normalize());
-    let (mut hit, mut inside, mut outside) = (Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..100_000 {
-        let o = glam::Vec3::new(0.5 * unit(), 0.5 * unit(), 1.0 + unit());
-        let (a, b) = (0.5 * unit(), 0.5 * unit());
-        hit.push(aimed(o, glam::Vec3::new(a, b, 0.0)));
-        // In the box, past the hypotenuse.
-        inside.push(aimed(o, glam::Vec3::new(1.0 - 0.3 * a, 1.0 - 0.3 * b, 0.0)));
-        outside.push(aimed(
-            o + glam::Vec3::new(3.0, 0.0, 0.0),
-            glam::Vec3::new(3.0 + a, b, 0.0),
-        ));
-    }
-    for (what, rays) in [
-        ("hit", &hit),
-        ("enter the box, miss", &inside),
-        ("miss the box", &outside),
-    ] {
+    for (what, rays) in &floor::ray_sets() {
         let (mut kd, mut gr) = (Vec::new(), Vec::new());
         for _ in 0..reps {
             let t = Instant::now();
@@ -313,7 +291,7 @@ fn floor(reps: usize) {
         }
         let n = rays.len() as f64;
         print!(
-            "{what:>20}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
+            "{what:>22}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
             median(kd) * 1e9 / n,
             median(gr) * 1e9 / n
         );

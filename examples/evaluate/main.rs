@@ -15,6 +15,8 @@
 //! (online switch), and the peers; the regret against the oracle (the better fixed choice knowing R).
 
 mod accuracy;
+#[path = "../../benches/shared/floor.rs"]
+mod floor;
 mod interior;
 #[cfg(feature = "peers")]
 #[path = "../../benches/shared/peer_structures.rs"]
@@ -394,6 +396,58 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64, released: boo
     } else {
         first * tg + b + s.check_s + rebuild + (r - first) * tg
     }
+}
+
+/// What a query costs besides its walk (benches/shared/floor.rs): ns per ray on a scene of one
+/// triangle, rayq's two structures and, with the peers, Embree MEDIUM (`rtcIntersect1`), thread
+/// CPU time, medians of 5.
+fn floor_section(md: &mut String) {
+    use rayq::accel::RayQuery;
+    use rayq::select::measure::median_ns;
+    let data = floor::scene();
+    let Ok(mesh) = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)) else {
+        return;
+    };
+    let (Ok(tree), Ok(grid)) = (
+        KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)),
+        UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)),
+    ) else {
+        return;
+    };
+    #[cfg(feature = "peers")]
+    let device = peer_structures::EmbreeDevice::new().ok();
+    #[cfg(feature = "peers")]
+    let embree = peer_structures::Kind::Embree(peer_structures::embree3::RTC_BUILD_QUALITY_MEDIUM)
+        .build(&data, device.as_ref())
+        .ok();
+    let _ = writeln!(
+        md,
+        "## A query's fixed cost\n\nns per ray on a scene of one triangle (every structure one leaf \
+         or cell; benches/shared/floor.rs), one thread, medians of 5: what a query pays besides its \
+         walk — preparing the ray, and for a hit the exact test.\n\n| rays | rayq kd-tree | rayq grid \
+         | Embree MEDIUM |\n|---|---:|---:|---:|"
+    );
+    for (what, rays) in &floor::ray_sets() {
+        let n = rays.len() as f64;
+        let per_ray = |accel: &dyn RayQuery| {
+            median_ns(5, || {
+                rays.iter()
+                    .filter(|r| accel.intersect(&mesh, r).is_hit())
+                    .count()
+            })
+            .0 / n
+        };
+        let (kd, gr) = (per_ray(&tree), per_ray(&grid));
+        #[cfg(feature = "peers")]
+        let peer = embree
+            .as_ref()
+            .map(|b| format!("{:.1}", median_ns(5, || b.count_hits(rays)).0 / n))
+            .unwrap_or_else(|| "—".into());
+        #[cfg(not(feature = "peers"))]
+        let peer = "—";
+        let _ = writeln!(md, "| {what} | {kd:.1} | {gr:.1} | {peer} |");
+    }
+    md.push('\n');
 }
 
 /// The strategies' totals, AUTO's with trial builds at `share` of the grid's estimated time (0: none).
@@ -1246,17 +1300,20 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         if !ray_ratios.is_empty() {
             let _ = writeln!(
                 md,
-                "\nkd-tree throughput / Embree MEDIUM: median {:.2} (range {:.2}–{:.2}); kd-tree build / \
-                 Embree MEDIUM build: median {:.1}× (range {:.1}–{:.1}×).\n",
+                "\nkd-tree throughput / Embree MEDIUM: geometric mean {:.3}, median {:.2} (range {:.2}–{:.2}); \
+                 kd-tree build / Embree MEDIUM build: geometric mean {:.2}×, median {:.1}× (range {:.1}–{:.1}×).\n",
+                geomean(&ray_ratios),
                 median(&mut ray_ratios.clone()),
                 ray_ratios.iter().copied().fold(f64::INFINITY, f64::min),
                 ray_ratios.iter().copied().fold(0.0, f64::max),
+                geomean(&build_ratios),
                 median(&mut build_ratios.clone()),
                 build_ratios.iter().copied().fold(f64::INFINITY, f64::min),
                 build_ratios.iter().copied().fold(0.0, f64::max)
             );
         }
     }
+    floor_section(&mut md);
 
     // Peers: where AUTO has the lowest total.
     if results.iter().any(|m| !m.peers.is_empty()) {
