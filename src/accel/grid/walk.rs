@@ -4,7 +4,7 @@
 //! with a nested grid is walked again by `walk_nested`, which walks nested grids in place of their
 //! cells' lists (docs/design.md, "Nested grids").
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 use super::blocks::BLOCK;
 use super::nested::MAX_DEPTH;
@@ -53,23 +53,32 @@ enum Plan {
 
 impl Line {
     /// The line to walk for `r` through `grid` (non-empty), clipped to the box.
+    ///
+    /// Four lanes at a time (the fourth unused): every value is the one the scalar arithmetic
+    /// gives (the same IEEE operations per lane), and none can be NaN where `min`/`max` meet it —
+    /// the box, the origin and the direction are finite, a finite inverse times a finite
+    /// difference is never NaN, and the lanes of a non-finite inverse are replaced before they
+    /// are compared — so the SSE `min`/`max`, which do not handle NaN, give the same answers.
     #[inline(always)]
     fn of(grid: &UniformGrid, r: &PreparedRay) -> Plan {
         let shape = &grid.shape;
         let (mut o, mut d) = (r.org, r.dir);
         let (mut t0, mut t1) = (r.tmin, r.tmax);
-        let (lo, hi) = (shape.bounds.min, shape.bounds.max);
+        let (lo, hi) = (Vec3A::from(shape.bounds.min), Vec3A::from(shape.bounds.max));
         let mut early_exit = true;
         // An origin farther than the margin covers: walk the same line from where it enters the
         // box (found in f64, rounded to f32: off the line by far less than the margin), over the
         // whole box and without the early exit, whose t would be in the wrong frame. Beyond 2^40
         // cells even the f64 entry point may be off by more than the margin: test every triangle.
-        let reach = (lo - o).abs().max((hi - o).abs()).max_element();
+        let reach = (lo - Vec3A::from(o))
+            .abs()
+            .max((hi - Vec3A::from(o)).abs())
+            .max_element();
         if !(reach <= shape.near_reach) {
             if !(reach <= FAR_WALK_CELLS * shape.min_cell) {
                 return Plan::TestAll;
             }
-            match entry_point(o, d, lo, hi) {
+            match entry_point(o, d, shape.bounds.min, shape.bounds.max) {
                 Some(p) => o = p,
                 None => return Plan::Miss,
             }
@@ -87,37 +96,41 @@ impl Line {
         // component that is still too small to invert is below 2^-126 of the largest, so across
         // the box the ray moves along it by less than 2^-126 of the box's extent, far inside the
         // box's padding and the cells' margin: treating that axis as parallel still covers the line.
-        let mut inv = Vec3::ONE / d;
-        let largest = d.abs().max_element();
-        let magnitude = lo.abs().max(hi.abs()).max_element() + o.abs().max_element();
-        let uninvertible = (0..3).any(|a| d[a] != 0.0 && !inv[a].is_finite());
+        let (o4, mut d4) = (Vec3A::from(o), Vec3A::from(d));
+        let mut inv = Vec3A::ONE / d4;
+        let largest = d4.abs().max_element();
+        let magnitude = lo.abs().max(hi.abs()).max_element() + o4.abs().max_element();
+        // A non-zero component whose inverse is ±∞ (d is finite, so the inverse is never NaN).
+        let uninvertible = (d4.cmpne(Vec3A::ZERO) & inv.abs().cmpeq(Vec3A::INFINITY)).any();
         let may_overflow = largest * (f32::MAX / 1024.0) < magnitude;
         let subnormal_t =
             f64::from(largest) * SUBNORMAL_T_ERROR > f64::from(shape.margin.min_element());
         if uninvertible || may_overflow || subnormal_t {
             early_exit = false;
             d = unit_scaled(d, largest);
-            inv = Vec3::ONE / d;
+            d4 = Vec3A::from(d);
+            inv = Vec3A::ONE / d4;
             t0 = -f32::INFINITY;
             t1 = f32::INFINITY;
         }
-        for a in 0..3 {
-            if inv[a].is_finite() {
-                let ta = (lo[a] - o[a]) * inv[a];
-                let tb = (hi[a] - o[a]) * inv[a];
-                t0 = t0.max(ta.min(tb));
-                t1 = t1.min(ta.max(tb));
-            } else if o[a] < lo[a] || o[a] > hi[a] {
-                return Plan::Miss;
-            }
+        // Axes with a finite inverse bound t by the box's slab; the others (the ray parallel to
+        // the slab) miss when the origin is outside it.
+        let finite = inv.abs().cmplt(Vec3A::INFINITY);
+        if (!finite & (o4.cmplt(lo) | o4.cmpgt(hi))).any() {
+            return Plan::Miss;
         }
+        let (ta, tb) = ((lo - o4) * inv, (hi - o4) * inv);
+        let near = Vec3A::select(finite, ta.min(tb), Vec3A::NEG_INFINITY).max_element();
+        let far = Vec3A::select(finite, ta.max(tb), Vec3A::INFINITY).min_element();
+        t0 = if near > t0 { near } else { t0 };
+        t1 = if far < t1 { far } else { t1 };
         if !(t0 <= t1) {
             return Plan::Miss;
         }
         Plan::Walk(Line {
             org: o,
             dir: d,
-            inv,
+            inv: inv.into(),
             t0,
             t1,
             early_exit,
