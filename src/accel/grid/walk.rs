@@ -384,7 +384,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 {
                     return h;
                 }
-                t_stop = t_stop.min(best.t.max(no_exit));
+                t_stop = lesser(t_stop, greater(best.t, no_exit));
             }
             if !step(
                 grid, &mut axes, axis, t_axis, &mut index, &mut block, t_stop, work, COUNT,
@@ -482,7 +482,7 @@ fn walk_nested<const ANY: bool>(
                     return h;
                 }
             }
-            at.t_stop = at.t_stop.min(best.t.max(at.no_exit));
+            at.t_stop = lesser(at.t_stop, greater(best.t, at.no_exit));
         }
         // The next cell, of this walk or, when it ends, of the outer one.
         let (mut axis, mut t_axis) = (axis, t_axis);
@@ -506,7 +506,7 @@ fn walk_nested<const ANY: bool>(
             };
             depth -= 1;
             (walked, axes, at) = (grid, outer_axes, outer_at);
-            at.t_stop = at.t_stop.min(best.t.max(at.no_exit));
+            at.t_stop = lesser(at.t_stop, greater(best.t, at.no_exit));
             (axis, t_axis) = axes.next();
         }
     }
@@ -622,7 +622,7 @@ impl Axes {
         } else {
             f32::INFINITY
         };
-        let t_stop = next_up(line.t1).min(limit.max(no_exit));
+        let t_stop = lesser(next_up(line.t1), greater(limit, no_exit));
         let Some(steps) = axes.enter_block(grid, &mut block, &mut index, t_stop) else {
             return Start::Nothing;
         };
@@ -676,6 +676,27 @@ fn step(
         }
     }
     true
+}
+
+/// The smaller of `a` and `b`, neither NaN (a hit's t, a window's end, ±∞): one comparison, where
+/// `f32::min` also handles NaN (several instructions, and this runs once per cell with triangles).
+#[inline(always)]
+fn lesser(a: f32, b: f32) -> f32 {
+    if b < a {
+        b
+    } else {
+        a
+    }
+}
+
+/// The larger of `a` and `b`, neither NaN (see [`lesser`]).
+#[inline(always)]
+fn greater(a: f32, b: f32) -> f32 {
+    if b > a {
+        b
+    } else {
+        a
+    }
 }
 
 /// The smallest f32 above `x` (`x` itself for NaN and +∞).
