@@ -120,7 +120,14 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// -- --variant "kd build without grid references" --repeats 9` (its defaults: the bundled scenes
 /// plus the procedural set, 23 scenes) on the project's 2-core x86-64 VM (an Intel Xeon), refitted
 /// at stop 25 after the kd-tree's empty-space bonus went from 0.5 to 0.125 (0.94× the time per
-/// ray); `calib/default.rqcal` holds the same values as a blob (a test keeps the
+/// ray). Not refitted at stop 26, when the grid's line clip went four lanes wide (its fixed cost
+/// per ray 12–15 ns lower): a refit measured then (two runs within 1.6 %) put the grid's cost per
+/// ray at 76.3 ns instead of 89.4 and left the other constants within 4 %, and with it the interior
+/// case of issue 14 (docs/evaluation.md, "Interior camera"; the two structures now within 2 % per
+/// ray there) starts on the grid and switches at `rq_scene_update` on its tapped primary rays,
+/// which overstate the kd-tree's saving on the occlusion rays that follow (AUTO / better 1.074
+/// against 1.007 with these values): the refit waits for that switch to be fixed.
+/// `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
 /// since stop 20). Two runs of 9 repeats gave constants within 2 % of each other (a cell 14.7 and
 /// 14.4 ns, a kd-tree build 23.9 and 24.2 ns per N·log2 N); this is the first. The grid's constants
