@@ -149,8 +149,9 @@ fn every_kth(data: &MeshData, k: usize) -> MeshData {
     }
 }
 
-/// What `probe` keeps of one scene for the summary: the measured kd/grid time per ray and three
-/// predictions of it, and the kd-tree's build time with two predictors of it.
+/// What `probe` keeps of one scene for the summary: the measured kd/grid time per ray, the model's
+/// estimate of it, the check's priced kd/grid work on the full and on the sampled structures, and
+/// the kd-tree's build time with two predictors of it.
 struct Probe {
     ray_ratio: [f64; 4],
     build_ms: f64,
@@ -177,13 +178,24 @@ fn loo_log_errors(x: &[f64], y: &[f64]) -> Vec<f64> {
 }
 
 /// `probe`: the selector's default sample rays through the full kd-tree and grid and through those
-/// of every 16th triangle (at least 1 024), counted work priced by stop 25's per-ray fit, against
-/// the measured time per ray of the workload; and the kd-tree's build against `N·log2 N` and
+/// of every 16th triangle (at least 1 024), counted work priced as the check after a kd-tree
+/// build prices it (`select::decision::priced_work`), against the measured time per ray of the
+/// workload; and the kd-tree's build against `N·log2 N` and
 /// against the sampled tree's build scaled by `N·log2 N / (N'·log2 N')`.
 fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
     use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
-    let kd_ns = |nodes: f64, tests: f64| 6.8 + 10.0 * nodes + 1.14 * tests;
-    let grid_ns = |cells: f64, tests: f64| 75.9 + 20.9 * cells + 0.77 * tests;
+    // The counted work priced as the check after a kd-tree build prices it, kd-tree over grid.
+    let priced_ratio = |grid: &rayq::select::model::SceneFeatures,
+                        kd: &rayq::select::model::SceneFeatures| {
+        let (g, k) = rayq::select::decision::priced_work(
+            rayq::Calibration::builtin(),
+            grid,
+            kd,
+            rayq::select::decision::KD_NODE_PER_CELL_STEP,
+            rayq::select::decision::KD_TEST_PER_GRID_TEST,
+        );
+        k / g
+    };
     let nlogn = |n: usize| n as f64 * (n.max(2) as f64).log2();
     let timed_build = |m: &TriMesh| {
         let mut t = Vec::new();
@@ -197,15 +209,7 @@ fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
     };
     let (build_ms, tree) = timed_build(mesh);
     let grid = UniformGrid::build(mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
-    let (mut kd, mut gr) = (Vec::new(), Vec::new());
-    for _ in 0..reps {
-        let t = Instant::now();
-        std::hint::black_box(kd_trace(&tree, mesh, rays));
-        kd.push(t.elapsed().as_secs_f64());
-        let t = Instant::now();
-        std::hint::black_box(grid_trace(&grid, mesh, rays));
-        gr.push(t.elapsed().as_secs_f64());
-    }
+    let (kd, gr) = time_both(&tree, &grid, mesh, rays, reps);
     let p = SampleParams::DEFAULT;
     let (g, k) = (
         sample_grid(&grid, mesh, None, &p),
@@ -222,15 +226,14 @@ fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
         sample_kdtree(&sub_tree, &sub, None, &p),
     );
     let ray_ratio = [
-        median(kd) / median(gr),
+        kd / gr,
         est.kd_ray_seconds / est.grid_ray_seconds,
-        kd_ns(k.cells_per_ray(), k.tests_per_ray()) / grid_ns(g.cells_per_ray(), g.tests_per_ray()),
-        kd_ns(sk.cells_per_ray(), sk.tests_per_ray())
-            / grid_ns(sg.cells_per_ray(), sg.tests_per_ray()),
+        priced_ratio(&g, &k),
+        priced_ratio(&sg, &sk),
     ];
     let scaled_sub = sub_ms * nlogn(mesh.len()) / nlogn(sub.len());
     println!(
-        "{:>8} tris, sampled {:>6} | kd/grid per ray: measured {:.2}, model {:.2}, full counts {:.2}, sampled counts {:.2} | kd build {:7.2} ms, sampled {:6.3} ms ({:.1} %), scaled {:7.2}",
+        "{:>8} tris, sampled {:>6} | kd/grid per ray: measured {:.2}, model {:.2}, priced work {:.2}, sampled priced work {:.2} | kd build {:7.2} ms, sampled {:6.3} ms ({:.1} %), scaled {:7.2}",
         mesh.len(),
         sub.len(),
         ray_ratio[0],
@@ -255,15 +258,33 @@ fn probe_summary(probes: &[Probe]) {
         e.sort_by(f64::total_cmp);
         (e[e.len() / 2], e[e.len() - 1])
     };
-    for (i, what) in [(1, "model"), (2, "full counts"), (3, "sampled counts")] {
-        let (m, w) = stats(
+    let error = |i: usize, truth: usize| {
+        stats(
             probes
                 .iter()
-                .map(|p| (p.ray_ratio[i] / p.ray_ratio[0]).ln().abs())
+                .map(|p| (p.ray_ratio[i] / p.ray_ratio[truth]).ln().abs())
                 .collect(),
-        );
-        println!("kd/grid per ray from the {what}: median |ln error| {m:.3}, largest {w:.3}");
-    }
+        )
+    };
+    let (m, w) = error(1, 0);
+    println!("kd/grid time per ray from the model: median |ln error| {m:.3}, largest {w:.3}");
+    let (m, w) = error(3, 2);
+    println!(
+        "the check's priced work, sampled against full structures: median |ln error| {m:.3}, largest {w:.3}"
+    );
+    // The check keeps the kd-tree when its priced work is below the grid's (ratio below 1).
+    let agree = probes
+        .iter()
+        .filter(|p| (p.ray_ratio[2] < 1.0) == (p.ray_ratio[3] < 1.0))
+        .count();
+    let right = probes
+        .iter()
+        .filter(|p| (p.ray_ratio[2] < 1.0) == (p.ray_ratio[0] < 1.0))
+        .count();
+    println!(
+        "the check's verdict: sampled structures agree with the full ones on {agree} of {n}; the full ones pick the faster on {right} of {n}",
+        n = probes.len()
+    );
     let y: Vec<f64> = probes.iter().map(|p| p.build_ms).collect();
     for (i, what) in [(0, "N log2 N"), (1, "the sampled tree's build, scaled")] {
         let x: Vec<f64> = probes.iter().map(|p| p.build_predictors[i]).collect();
@@ -272,47 +293,39 @@ fn probe_summary(probes: &[Probe]) {
     }
 }
 
-/// `floor`: what a query costs beside its walk (benches/shared/floor.rs), ns per ray (medians of
-/// `reps`), with Embree 3 MEDIUM beside it when built with `--features peers`.
+/// `floor`: what a query costs beside its walk (benches/shared/floor.rs), ns per ray (thread CPU
+/// time, medians of `reps`), with Embree 3 MEDIUM beside it when built with `--features peers`.
 fn floor(reps: usize) {
-    let data = floor::scene();
-    let mesh = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)).unwrap();
-    let tree = kd_build(&mesh);
-    let grid = UniformGrid::build(&mesh, &grid_params(), &mut MemoryBudget::new(0)).unwrap();
-    for (what, rays) in &floor::ray_sets() {
-        let (mut kd, mut gr) = (Vec::new(), Vec::new());
-        for _ in 0..reps {
-            let t = Instant::now();
-            std::hint::black_box(kd_trace(&tree, &mesh, rays));
-            kd.push(t.elapsed().as_secs_f64());
-            let t = Instant::now();
-            std::hint::black_box(grid_trace(&grid, &mesh, rays));
-            gr.push(t.elapsed().as_secs_f64());
-        }
-        let n = rays.len() as f64;
+    for c in floor::measure(reps as u32) {
         print!(
-            "{what:>22}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
-            median(kd) * 1e9 / n,
-            median(gr) * 1e9 / n
+            "{:>22}: kd {:6.1} ns/ray grid {:6.1} ns/ray",
+            c.what, c.kd, c.grid
         );
-        #[cfg(feature = "peers")]
-        {
-            use peer_structures::{embree3, EmbreeDevice, Kind};
-            let device = EmbreeDevice::new().ok();
-            if let Ok(built) =
-                Kind::Embree(embree3::RTC_BUILD_QUALITY_MEDIUM).build(&data, device.as_ref())
-            {
-                let mut em = Vec::new();
-                for _ in 0..reps {
-                    let t = Instant::now();
-                    std::hint::black_box(built.count_hits(rays));
-                    em.push(t.elapsed().as_secs_f64());
-                }
-                print!(" Embree MEDIUM {:6.1} ns/ray", median(em) * 1e9 / n);
-            }
+        if let Some(e) = c.embree {
+            print!(" Embree MEDIUM {e:6.1} ns/ray");
         }
         println!();
     }
+}
+
+/// Medians of `reps` alternated runs of `rays` through the kd-tree and the grid, in seconds.
+fn time_both(
+    tree: &KdTree,
+    grid: &UniformGrid,
+    mesh: &TriMesh,
+    rays: &[Ray],
+    reps: usize,
+) -> (f64, f64) {
+    let (mut kd, mut gr) = (Vec::new(), Vec::new());
+    for _ in 0..reps {
+        let t = Instant::now();
+        std::hint::black_box(kd_trace(tree, mesh, rays));
+        kd.push(t.elapsed().as_secs_f64());
+        let t = Instant::now();
+        std::hint::black_box(grid_trace(grid, mesh, rays));
+        gr.push(t.elapsed().as_secs_f64());
+    }
+    (median(kd), median(gr))
 }
 
 fn main() {
@@ -438,20 +451,12 @@ fn main() {
                 grid_trace(&grid, &mesh, &rays)
             ),
             "time" => {
-                let (mut kd, mut gr) = (Vec::new(), Vec::new());
-                for _ in 0..reps {
-                    let t = Instant::now();
-                    std::hint::black_box(kd_trace(&tree, &mesh, &rays));
-                    kd.push(t.elapsed().as_secs_f64());
-                    let t = Instant::now();
-                    std::hint::black_box(grid_trace(&grid, &mesh, &rays));
-                    gr.push(t.elapsed().as_secs_f64());
-                }
+                let (kd, gr) = time_both(&tree, &grid, &mesh, &rays, reps);
                 println!(
                     "{name:>16} N {:>8} kd {:7.1} ns/ray grid {:7.1} ns/ray",
                     mesh.len(),
-                    median(kd) * 1e9 / n,
-                    median(gr) * 1e9 / n
+                    kd * 1e9 / n,
+                    gr * 1e9 / n
                 );
             }
             "check" => {

@@ -402,24 +402,6 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64, released: boo
 /// triangle, rayq's two structures and, with the peers, Embree MEDIUM (`rtcIntersect1`), thread
 /// CPU time, medians of 5.
 fn floor_section(md: &mut String) {
-    use rayq::accel::RayQuery;
-    use rayq::select::measure::median_ns;
-    let data = floor::scene();
-    let Ok(mesh) = TriMesh::from_source(&data.as_source(), &mut MemoryBudget::new(0)) else {
-        return;
-    };
-    let (Ok(tree), Ok(grid)) = (
-        KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)),
-        UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)),
-    ) else {
-        return;
-    };
-    #[cfg(feature = "peers")]
-    let device = peer_structures::EmbreeDevice::new().ok();
-    #[cfg(feature = "peers")]
-    let embree = peer_structures::Kind::Embree(peer_structures::embree3::RTC_BUILD_QUALITY_MEDIUM)
-        .build(&data, device.as_ref())
-        .ok();
     let _ = writeln!(
         md,
         "## A query's fixed cost\n\nns per ray on a scene of one triangle (every structure one leaf \
@@ -427,25 +409,13 @@ fn floor_section(md: &mut String) {
          walk — preparing the ray, and for a hit the exact test.\n\n| rays | rayq kd-tree | rayq grid \
          | Embree MEDIUM |\n|---|---:|---:|---:|"
     );
-    for (what, rays) in &floor::ray_sets() {
-        let n = rays.len() as f64;
-        let per_ray = |accel: &dyn RayQuery| {
-            median_ns(5, || {
-                rays.iter()
-                    .filter(|r| accel.intersect(&mesh, r).is_hit())
-                    .count()
-            })
-            .0 / n
-        };
-        let (kd, gr) = (per_ray(&tree), per_ray(&grid));
-        #[cfg(feature = "peers")]
-        let peer = embree
-            .as_ref()
-            .map(|b| format!("{:.1}", median_ns(5, || b.count_hits(rays)).0 / n))
-            .unwrap_or_else(|| "—".into());
-        #[cfg(not(feature = "peers"))]
-        let peer = "—";
-        let _ = writeln!(md, "| {what} | {kd:.1} | {gr:.1} | {peer} |");
+    for c in floor::measure(5) {
+        let embree = c.embree.map_or_else(|| "—".into(), |e| format!("{e:.1}"));
+        let _ = writeln!(
+            md,
+            "| {} | {:.1} | {:.1} | {embree} |",
+            c.what, c.kd, c.grid
+        );
     }
     md.push('\n');
 }

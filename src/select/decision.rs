@@ -213,11 +213,33 @@ pub fn kd_tree_confirmed_at(
     node_per_cell_step: f64,
     test_per_grid_test: f64,
 ) -> bool {
+    let (grid_cost, kd_cost) = priced_work(
+        calibration,
+        grid,
+        kd,
+        node_per_cell_step,
+        test_per_grid_test,
+    );
+    kd.rays == 0 || kd_cost < grid_cost || grid.has_heavy_cell()
+}
+
+/// The counted work per ray of the same rays on the grid (`grid`) and on the kd-tree (`kd`, whose
+/// `cells` are nodes), priced as the check after a kd-tree build prices it
+/// ([`kd_tree_confirmed_at`]): a cell step and a grid test at the calibration's constants, a node
+/// visit at `node_per_cell_step` of a cell step and a kd-tree test at `test_per_grid_test` grid
+/// tests. Nanoseconds per ray, without the fixed cost of a ray: `(grid, kd)`.
+pub fn priced_work(
+    calibration: &Calibration,
+    grid: &SceneFeatures,
+    kd: &SceneFeatures,
+    node_per_cell_step: f64,
+    test_per_grid_test: f64,
+) -> (f64, f64) {
     let (cell, test) = (calibration.value(2), calibration.value(3));
     let grid_cost = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
     let kd_cost = node_per_cell_step * cell * kd.cells_per_ray()
         + test_per_grid_test * test * kd.tests_per_ray();
-    kd.rays == 0 || kd_cost < grid_cost || grid.has_heavy_cell()
+    (grid_cost, kd_cost)
 }
 
 /// How much work [`kd_tree_work_limit`] lets a kd-tree build do, per `N·log2 N`, before the
