@@ -191,8 +191,7 @@ fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
             rayq::Calibration::builtin(),
             grid,
             kd,
-            rayq::select::decision::KD_NODE_PER_CELL_STEP,
-            rayq::select::decision::KD_TEST_PER_GRID_TEST,
+            &rayq::select::decision::CheckPrices::LIBRARY,
         );
         k / g
     };

@@ -601,7 +601,7 @@ fn a_heavy_grid_cell_keeps_the_kd_tree_whatever_the_samples_say() {
     // The grid has a heavy cell. Priced so that the samples' counts drop the kd-tree (node visits
     // as dear as cell steps, tests three times the grid's: until stop 24 the library's own prices
     // did), the check keeps it all the same; without the heavy cell it would not.
-    use rayq::select::decision::kd_tree_confirmed_at;
+    use rayq::select::decision::{kd_tree_confirmed_at, CheckPrices};
     let samples = SampleParams::DEFAULT;
     let (g, k) = (
         sample_grid(&grid, &mesh, None, &samples),
@@ -613,8 +613,13 @@ fn a_heavy_grid_cell_keeps_the_kd_tree_whatever_the_samples_say() {
         ..g
     };
     let cal = Calibration::builtin();
-    assert!(!kd_tree_confirmed_at(cal, &plain, &k, 1.0, 3.0));
-    assert!(kd_tree_confirmed_at(cal, &g, &k, 1.0, 3.0));
+    let dear = CheckPrices {
+        fixed_per_grid_fixed: 1.0,
+        node_per_cell_step: 1.0,
+        test_per_grid_test: 3.0,
+    };
+    assert!(!kd_tree_confirmed_at(cal, &plain, &k, &dear));
+    assert!(kd_tree_confirmed_at(cal, &g, &k, &dear));
     // AUTO with a budget that builds the kd-tree keeps it.
     let scene = Scene::build(
         &data.as_source(),

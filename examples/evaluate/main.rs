@@ -29,10 +29,10 @@ use std::path::PathBuf;
 use rayq::mesh::MeshData;
 use rayq::select::calibration::BUILTIN_VARIANT;
 use rayq::select::decision::{
-    kd_tree_confirmed, kd_tree_confirmed_at, kd_tree_work_limit, CostEstimate,
-    KD_NODE_PER_CELL_STEP, KD_TEST_PER_GRID_TEST, TRIAL_SHARE,
+    kd_tree_confirmed, kd_tree_confirmed_at, kd_tree_work_limit, CheckPrices, CostEstimate,
+    TRIAL_SHARE,
 };
-use rayq::select::fit::Observation;
+use rayq::select::fit::{fit_check_prices, CheckObservation, Observation};
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
@@ -539,8 +539,9 @@ fn with_side(results: &[Measured], k: usize) -> Vec<Observation> {
 }
 
 /// The check after a kd-tree build (`kd_tree_confirmed`) against the measured per-ray times: how
-/// often it keeps the faster structure with the library's prices, and which prices would do best
-/// (in-sample, and leave-one-out so that the fit's optimism shows).
+/// often it keeps the faster structure with the library's prices, and with prices fitted on this
+/// run's measurements (`select::fit::fit_check_prices`; in-sample, and leave-one-out so that the
+/// fit's optimism shows).
 fn check_section(md: &mut String, results: &[Measured]) {
     // The library's default sample rays.
     let default_side = SampleParams::DEFAULT.camera_side;
@@ -550,93 +551,90 @@ fn check_section(md: &mut String, results: &[Measured]) {
         .unwrap_or(SAMPLE_SIDES.len() - 1);
     let calibration = rayq::Calibration::builtin();
     // What a wrong verdict costs on scene `m`: the slower structure's extra time per ray.
-    let loss = |m: &Measured, node: f64, test: f64| {
+    let loss = |m: &Measured, prices: &CheckPrices| {
         let keeps_kd =
-            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, node, test);
+            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, prices);
         let (g, kd) = (m.obs.grid_ray_ns, m.obs.kd_ray_ns);
         let kept = if keeps_kd { kd } else { g };
         kept / g.min(kd) - 1.0
     };
-    let nodes = [
-        0.0, 0.025, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.35, 0.4, 0.5, 0.6, 0.8, 1.0,
-    ];
-    let tests = [0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0, 2.5, 3.0];
-    let score = |skip: Option<usize>, node: f64, test: f64| -> f64 {
-        results
+    let observation = |m: &Measured| CheckObservation {
+        grid: m.samples[k].0,
+        kd: m.kd_samples[k].0,
+        grid_ray_ns: m.obs.grid_ray_ns,
+        kd_ray_ns: m.obs.kd_ray_ns,
+    };
+    let fitted = |skip: Option<usize>| {
+        let obs: Vec<CheckObservation> = results
             .iter()
             .enumerate()
             .filter(|&(i, _)| Some(i) != skip)
-            .map(|(_, m)| loss(m, node, test))
-            .sum()
-    };
-    let best = |skip: Option<usize>| {
-        let mut b = (f64::INFINITY, 0.0, 0.0);
-        for &node in &nodes {
-            for &test in &tests {
-                let s = score(skip, node, test);
-                if s < b.0 {
-                    b = (s, node, test);
-                }
-            }
-        }
-        b
-    };
-    let right = |node: f64, test: f64| {
-        results
-            .iter()
-            .filter(|m| loss(m, node, test) == 0.0)
-            .count()
-    };
-    let (lib_node, lib_test) = (KD_NODE_PER_CELL_STEP, KD_TEST_PER_GRID_TEST);
-    let (_, fit_node, fit_test) = best(None);
-    let loo: Vec<f64> = (0..results.len())
-        .map(|i| {
-            let (_, node, test) = best(Some(i));
-            loss(&results[i], node, test)
-        })
-        .collect();
-    let worst = |node: f64, test: f64| {
-        results
-            .iter()
-            .map(|m| (loss(m, node, test), m.name.as_str()))
-            .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a })
+            .map(|(_, m)| observation(m))
+            .collect();
+        fit_check_prices(&obs, calibration)
     };
     let _ = writeln!(
         md,
-        "\n### The check after a kd-tree build\n\nThe kd-tree is kept only if its counted work on \
-         the sample rays (a node priced at a share of a grid cell step, a test at a multiple of a grid \
-         test) is below the grid's (`kd_tree_confirmed`). Against the measured per-ray times of the \
-         workload, on the {} scenes (the library's default sample rays); *loss*: the kept \
-         structure's time per ray over the faster one's, summed over the scenes; prices searched \
-         over a grid of {} × {}:\n",
-        results.len(),
-        nodes.len(),
-        tests.len()
+        "\n### The check after a kd-tree build\n\nThe kd-tree is kept only if its time per ray on \
+         the sample rays, priced from their counted work, is below the grid's (`kd_tree_confirmed`): \
+         the grid's by the calibration's grid model, the kd-tree's at a share of the grid's fixed \
+         cost per ray, a share of a cell step per node and a multiple of a grid test per test. \
+         Against the measured per-ray times of the workload, on the {} scenes (the library's default \
+         sample rays); *loss*: the kept structure's time per ray over the faster one's, summed over \
+         the scenes; *fitted*: least squares of the measured kd-tree − grid time per ray \
+         (`fit_check_prices`):\n",
+        results.len()
     );
     let _ = writeln!(
         md,
-        "| prices (node, test) | keeps the faster | loss | worst |\n|---|---:|---:|---|"
+        "| prices (fixed, node, test) | keeps the faster | loss | worst |\n|---|---:|---:|---|"
     );
-    for (label, node, test) in [
-        ("the library's", lib_node, lib_test),
-        ("best in-sample", fit_node, fit_test),
-    ] {
-        let w = worst(node, test);
+    // The prices least squares gave at stop 27 (`CheckPrices::LIBRARY` says why the library does
+    // not use them), judged on this run's measurements, which did not fit them.
+    let stop27 = CheckPrices {
+        fixed_per_grid_fixed: 0.62,
+        node_per_cell_step: 0.53,
+        test_per_grid_test: 1.47,
+    };
+    let mut rows = vec![
+        ("the library's", Some(CheckPrices::LIBRARY)),
+        ("fitted at stop 27", Some(stop27)),
+    ];
+    rows.push(("fitted on this run", fitted(None)));
+    for (label, prices) in rows {
+        let Some(p) = prices else {
+            let _ = writeln!(md, "| {label}: no fit | | | |");
+            continue;
+        };
+        let losses: Vec<(f64, &str)> = results
+            .iter()
+            .map(|m| (loss(m, &p), m.name.as_str()))
+            .collect();
+        let worst = losses
+            .iter()
+            .copied()
+            .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
         let _ = writeln!(
             md,
-            "| {label}: {node}, {test} | {} of {} | {:.3} | {} {:.1} % |",
-            right(node, test),
+            "| {label}: {:.2}, {:.2}, {:.2} | {} of {} | {:.3} | {} {:.1} % |",
+            p.fixed_per_grid_fixed,
+            p.node_per_cell_step,
+            p.test_per_grid_test,
+            losses.iter().filter(|l| l.0 == 0.0).count(),
             results.len(),
-            score(None, node, test),
-            w.1,
-            100.0 * w.0
+            losses.iter().map(|l| l.0).sum::<f64>(),
+            worst.1,
+            100.0 * worst.0
         );
     }
-    let loo_right = loo.iter().filter(|&&l| l == 0.0).count();
+    let loo: Vec<f64> = (0..results.len())
+        .filter_map(|i| fitted(Some(i)).map(|p| loss(&results[i], &p)))
+        .collect();
     let _ = writeln!(
         md,
-        "| leave-one-out (each scene judged by the prices best on the others) | {loo_right} of {} | {:.3} | |",
-        results.len(),
+        "| leave-one-out (each scene judged by prices fitted on the others) | {} of {} | {:.3} | |",
+        loo.iter().filter(|&&l| l == 0.0).count(),
+        loo.len(),
         loo.iter().sum::<f64>()
     );
 }

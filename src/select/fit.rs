@@ -3,7 +3,7 @@
 //! the rest refitted. Pure arithmetic: works in `no_std`, so a renderer can calibrate in-process.
 
 use super::calibration::{Calibration, CONSTANTS, CONSTANT_COUNT};
-use super::decision::CostEstimate;
+use super::decision::{CheckPrices, CostEstimate};
 use super::model::{Part, SceneFeatures, MAX_TERMS};
 use alloc::vec::Vec;
 
@@ -211,6 +211,66 @@ fn least_squares(
     }
 }
 
+/// One scene's evidence for the prices of the check after a kd-tree build: what the selector's
+/// sample rays did on each structure, and the measured time per ray of a workload on each.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct CheckObservation {
+    /// The sample rays' work on the grid.
+    pub grid: SceneFeatures,
+    /// The same rays' work on the kd-tree (`cells` are nodes).
+    pub kd: SceneFeatures,
+    /// Grid time per workload ray, nanoseconds.
+    pub grid_ray_ns: f64,
+    /// kd-tree time per workload ray, nanoseconds.
+    pub kd_ray_ns: f64,
+}
+
+/// The check's prices ([`CheckPrices`]) that fit `observations` best: least squares of the
+/// measured kd-tree − grid time per ray against the priced difference
+/// ([`crate::select::decision::priced_work`]), the grid's side priced by `calibration`. Observations
+/// without sample rays on both structures or with a non-finite time are left out; `None` when the
+/// rest cannot tell the three prices apart (fewer than three, or a singular system).
+pub fn fit_check_prices(
+    observations: &[CheckObservation],
+    calibration: &Calibration,
+) -> Option<CheckPrices> {
+    let grid_ray = Part::GridRay.constants().start;
+    let [fixed, cell, test] = [0, 1, 2].map(|k| calibration.value(grid_ray + k));
+    let usable = |o: &&CheckObservation| {
+        o.grid.rays > 0
+            && o.kd.rays > 0
+            && (o.kd_ray_ns - o.grid_ray_ns).is_finite()
+            && o.grid_ray_ns.is_finite()
+    };
+    if observations.iter().filter(usable).count() < MAX_TERMS {
+        return None;
+    }
+    // The kd-tree's priced time is `prices · terms`; it should equal the grid's priced time plus
+    // the measured difference.
+    let mut a = [[0.0f64; MAX_TERMS]; MAX_TERMS];
+    let mut b = [0.0f64; MAX_TERMS];
+    for o in observations.iter().filter(usable) {
+        let terms = [
+            fixed,
+            cell * o.kd.cells_per_ray(),
+            test * o.kd.tests_per_ray(),
+        ];
+        let y = Part::GridRay.predict(calibration, &o.grid) + (o.kd_ray_ns - o.grid_ray_ns);
+        for i in 0..MAX_TERMS {
+            b[i] += terms[i] * y;
+            for j in 0..MAX_TERMS {
+                a[i][j] += terms[i] * terms[j];
+            }
+        }
+    }
+    let [fixed_per_grid_fixed, node_per_cell_step, test_per_grid_test] = solve(a, b)?;
+    Some(CheckPrices {
+        fixed_per_grid_fixed,
+        node_per_cell_step,
+        test_per_grid_test,
+    })
+}
+
 /// Solves `a·x = b` by Gaussian elimination with partial pivoting; `None` when singular.
 // Row operations read one row while writing another: indices say that most plainly.
 #[allow(clippy::needless_range_loop)]
@@ -332,6 +392,55 @@ mod tests {
         let got = fit(&obs, &only_intercept, 0).unwrap();
         assert_eq!((got.value(2), got.value(3)), (0.0, 0.0));
         assert!(got.value(1) > 0.0);
+    }
+
+    #[test]
+    fn check_prices_are_recovered_from_times_they_explain() {
+        let cal = Calibration::builtin();
+        let truth = CheckPrices {
+            fixed_per_grid_fixed: 0.6,
+            node_per_cell_step: 0.5,
+            test_per_grid_test: 1.5,
+        };
+        let obs: Vec<CheckObservation> = [
+            (5.0, 40.0, 20.0, 10.0),
+            (9.0, 60.0, 18.0, 14.0),
+            (3.0, 20.0, 25.0, 30.0),
+            (7.0, 70.0, 12.0, 8.0),
+        ]
+        .iter()
+        .map(|&(cells, tests, nodes, kd_tests)| {
+            let (grid, kd) = (
+                features(1000, 0.5, cells, tests),
+                features(1000, 0.5, nodes, kd_tests),
+            );
+            let (g, k) = crate::select::decision::priced_work(cal, &grid, &kd, &truth);
+            CheckObservation {
+                grid,
+                kd,
+                // Any grid time: only the difference is fitted.
+                grid_ray_ns: 2.0 * g,
+                kd_ray_ns: 2.0 * g + (k - g),
+            }
+        })
+        .collect();
+        let got = fit_check_prices(&obs, cal).unwrap();
+        for (g, t) in [
+            (got.fixed_per_grid_fixed, truth.fixed_per_grid_fixed),
+            (got.node_per_cell_step, truth.node_per_cell_step),
+            (got.test_per_grid_test, truth.test_per_grid_test),
+        ] {
+            assert!((g - t).abs() < 1e-9, "{got:?}");
+        }
+        // Too few usable scenes (a NaN time, no kd samples) cannot tell three prices apart.
+        let mut few = obs[..3].to_vec();
+        few[0].kd_ray_ns = f64::NAN;
+        assert_eq!(fit_check_prices(&few, cal), None);
+        few[0] = CheckObservation {
+            kd: SceneFeatures::default(),
+            ..obs[0]
+        };
+        assert_eq!(fit_check_prices(&few, cal), None);
     }
 
     #[test]
