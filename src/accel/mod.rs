@@ -6,7 +6,7 @@ use crate::mesh::TriMesh;
 pub use crate::ray::Aabb;
 use crate::ray::{Hit, Ray};
 use crate::triangle::packs::{TriangleLayout, TrianglePacks};
-use crate::triangle::{Accept, Block4, PreparedRay, TriangleLoop, TriangleTest};
+use crate::triangle::{Accept, Block4, PreparedRay, TriHit, TriangleLoop, TriangleTest};
 
 pub mod brute;
 pub mod grid;
@@ -164,7 +164,12 @@ pub(crate) fn test_refs<T: TriangleTest, const ANY: bool>(
 /// The hit of triangle `prim` (corners `tri`) if the ray hits it and the query counts the hit.
 #[inline(always)]
 pub(crate) fn counted_hit<T: TriangleTest>(test: &T, prim: u32, tri: &[Vec3; 3]) -> Option<Hit> {
-    let hit = test.test(tri)?;
+    counted(test, prim, test.test(tri)?)
+}
+
+/// `hit` of triangle `prim` as a [`Hit`] if the query counts it.
+#[inline(always)]
+fn counted<T: TriangleTest>(test: &T, prim: u32, hit: TriHit) -> Option<Hit> {
     test.accept(prim, &hit).then_some(Hit {
         t: hit.t,
         u: hit.u,
@@ -220,7 +225,8 @@ fn test_lanes<T: TriangleTest, const ANY: bool>(
         if MAILBOX && mailbox.seen(prim) {
             continue;
         }
-        if let Some(h) = counted_hit(test, prim, &block.get(lane)) {
+        let hit = test.test_lane(block, lane);
+        if let Some(h) = hit.and_then(|hit| counted(test, prim, hit)) {
             if ANY {
                 return Some(h);
             }

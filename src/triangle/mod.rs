@@ -105,6 +105,11 @@ pub(crate) trait TriangleTest: Copy {
     fn ray(&self) -> &PreparedRay;
     /// Exactly [`PreparedRay::intersect_triangle`] on `tri` (finite coordinates), with the facing.
     fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit>;
+    /// [`TriangleTest::test`] on the triangle in lane `lane` of `block` (`lane & 3`), read from the
+    /// block itself: a copy of it made by the caller would be stored a float at a time and read
+    /// back in wider loads, which the processor cannot forward from the stores (a stall on every
+    /// exact test, measured).
+    fn test_lane(&self, block: &Block4, lane: usize) -> Option<TriHit>;
     /// Whether the query counts this hit of triangle `prim` (always, for a plain query).
     fn accept(&self, prim: u32, hit: &TriHit) -> bool;
     /// The lanes of `block` that [`TriangleTest::test`] might hit (bit `k` for lane `k`): every lane
@@ -142,7 +147,12 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
     // kernel instead of one per walk keeps the library small.
     #[inline(never)]
     fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
-        self.0.test_axes::<KZ, SWAP>(tri)
+        self.0.test_axes::<KZ, SWAP>(*tri)
+    }
+
+    #[inline(never)]
+    fn test_lane(&self, block: &Block4, lane: usize) -> Option<TriHit> {
+        self.0.test_axes::<KZ, SWAP>(block.get(lane))
     }
 
     #[inline(always)]
@@ -206,6 +216,16 @@ impl TriangleTest for AnyKernel<'_> {
             };
         }
         with_axes!(self.0, test)
+    }
+
+    #[inline(never)]
+    fn test_lane(&self, block: &Block4, lane: usize) -> Option<TriHit> {
+        macro_rules! test_lane {
+            ($kz:expr, $swap:expr) => {
+                Kernel::<$kz, $swap>(self.0, self.1, self.2).test_lane(block, lane)
+            };
+        }
+        with_axes!(self.0, test_lane)
     }
 
     #[inline(always)]
@@ -391,8 +411,11 @@ impl PreparedRay {
     /// with `S` the largest sheared `|x|, |y|` and `Z` the largest translated `|z|` of the three
     /// vertices, every sheared coordinate is within `e = u·(2S + 4Z)` of its exact value and every
     /// edge function within `S·(4u·S + 4e) + 2e²` (`u = 2^-53`, each factor rounded up).
+    ///
+    /// `tri` is taken by value so that it stays in registers: only the cold stages, which take it
+    /// by value too, store it (at their call).
     #[inline(always)]
-    fn test_axes<const KZ: usize, const SWAP: bool>(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
+    fn test_axes<const KZ: usize, const SWAP: bool>(&self, tri: [Vec3; 3]) -> Option<TriHit> {
         let kx = if SWAP { (KZ + 2) % 3 } else { (KZ + 1) % 3 };
         let ky = if SWAP { (KZ + 1) % 3 } else { (KZ + 2) % 3 };
         let o = &self.org64;
@@ -429,9 +452,7 @@ impl PreparedRay {
         let front = u > 0.0;
         match self.finish([u, v, w], bound, z, zmax, front) {
             Ok(hit) => hit,
-            Err(Undecided) => {
-                self.finish_exactly(&ExactTriangle::new(self.org, self.dir, tri), front)
-            }
+            Err(Undecided) => self.round_exactly(tri, front),
         }
     }
 
@@ -491,7 +512,7 @@ impl PreparedRay {
     #[inline(never)]
     fn decide_exactly(
         &self,
-        tri: &[Vec3; 3],
+        tri: [Vec3; 3],
         mut edges: [f64; 3],
         bound: f64,
         z: [f64; 3],
@@ -499,7 +520,7 @@ impl PreparedRay {
     ) -> Option<TriHit> {
         #[cfg(test)]
         COLD_EDGES.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-        let exact = ExactTriangle::new(self.org, self.dir, tri);
+        let exact = ExactTriangle::new(self.org, self.dir, &tri);
         let mut signs = [0i8; 3];
         for (k, (value, sign)) in edges.iter_mut().zip(signs.iter_mut()).enumerate() {
             if value.abs() > bound {
@@ -523,6 +544,13 @@ impl PreparedRay {
             Ok(hit) => hit,
             Err(Undecided) => self.finish_exactly(&exact, pos),
         }
+    }
+
+    /// [`PreparedRay::finish_exactly`] on `tri`.
+    #[cold]
+    #[inline(never)]
+    fn round_exactly(&self, tri: [Vec3; 3], front: bool) -> Option<TriHit> {
+        self.finish_exactly(&ExactTriangle::new(self.org, self.dir, &tri), front)
     }
 
     /// `t` rounded exactly, then the window, for a line known to meet the triangle.
