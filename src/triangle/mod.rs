@@ -261,12 +261,30 @@ impl TriangleLoop for Single<'_> {
     }
 }
 
-/// The largest magnitude of `N` values. `a > b ? a : b` is `f64::max` when neither is NaN (and
-/// magnitudes have no signed zeros), without `max`'s NaN handling.
+/// The larger of two magnitudes: `f64::max` when neither is NaN (and magnitudes have no signed
+/// zeros), without `max`'s NaN handling.
 #[inline(always)]
-fn max_abs<const N: usize>(x: [f64; N]) -> f64 {
-    x.iter()
-        .fold(0.0, |m, &v| if v.abs() > m { v.abs() } else { m })
+fn max2(a: f64, b: f64) -> f64 {
+    if a > b {
+        a
+    } else {
+        b
+    }
+}
+
+/// The largest magnitude of six values, as a tree of maxima (depth 3, not a chain of 6: the bound
+/// that needs it is on the hit path's longest chain). `max` is exact, so the order never changes
+/// the value.
+#[inline(always)]
+fn max_abs6(x: [f64; 6]) -> f64 {
+    let x = x.map(f64::abs);
+    max2(max2(max2(x[0], x[1]), max2(x[2], x[3])), max2(x[4], x[5]))
+}
+
+/// The largest magnitude of three values.
+#[inline(always)]
+fn max_abs3(x: [f64; 3]) -> f64 {
+    max2(max2(x[0].abs(), x[1].abs()), x[2].abs())
 }
 
 /// What the f64 stage could not settle about `t`: the exact stage rounds it.
@@ -432,8 +450,8 @@ impl PreparedRay {
         let u = cx * by - cy * bx;
         let v = ax * cy - ay * cx;
         let w = bx * ay - by * ax;
-        let s = max_abs([ax, ay, bx, by, cx, cy]);
-        let zmax = max_abs([az, bz, cz]);
+        let s = max_abs6([ax, ay, bx, by, cx, cy]);
+        let zmax = max_abs3([az, bz, cz]);
         let e = (s + s + 4.0 * zmax) * (U64 * BOUND_SLACK);
         let bound = (s * ((4.0 * U64 * BOUND_SLACK) * s + 4.0 * e) + 2.0 * (e * e)) * BOUND_SLACK
             + EDGE_BOUND_FLOOR64;
