@@ -287,6 +287,46 @@ fn max_abs3(x: [f64; 3]) -> f64 {
     max2(max2(x[0].abs(), x[1].abs()), x[2].abs())
 }
 
+/// `U64·σ` and `4·U64·σ` (σ = `BOUND_SLACK`): the coefficients of the derived bound
+/// `σ·(S·(4u·S + 4e) + 2e²)` with `e = u·(2S + 4Z)`, each factor rounded up ([`derived_bound`]).
+const K1: f64 = U64 * BOUND_SLACK;
+const K2: f64 = 4.0 * U64 * BOUND_SLACK;
+/// Relative margin of [`edge_bound`]'s coefficients over the expanded derivation's: covers the
+/// rounding of both forms (at most ten roundings each, `2^-52 ≪ 2^-30`).
+const EXPANDED_MARGIN: f64 = 1.0 + 1.0 / 1_073_741_824.0;
+/// The derived bound multiplied out: `σ·((K2 + 8K1 + 8K1²)·S² + (16K1 + 32K1²)·S·Z + 32K1²·Z²)`,
+/// each coefficient with the margin.
+const BOUND_SS: f64 = BOUND_SLACK * (K2 + 8.0 * K1 + 8.0 * K1 * K1) * EXPANDED_MARGIN;
+const BOUND_SZ: f64 = BOUND_SLACK * (16.0 * K1 + 32.0 * K1 * K1) * EXPANDED_MARGIN;
+const BOUND_ZZ: f64 = BOUND_SLACK * (32.0 * K1 * K1) * EXPANDED_MARGIN;
+
+/// The bound on the error of the f64 edge functions of a triangle whose largest sheared `|x|, |y|`
+/// is `s` and largest translated `|z|` is `zmax` ([`PreparedRay::test_axes`] derives it): the
+/// derivation's polynomial multiplied out, four dependent operations after `s` instead of eight
+/// (the hit's longest chain runs through it, as `finish`'s slack needs it).
+///
+/// It is at least the derivation's factored form computed in f64 ([`derived_bound`], the bound
+/// until stop 27): that form is the polynomial `P` of the constants above with at most ten
+/// roundings of non-negative values, so at most `(1 + 2^-53)^10·P` plus its floor `F` (1e-300)
+/// rounded once, plus what underflow adds (at most 2^-1075 an operation, and only to products so
+/// small that later factors cannot enlarge them: under 1e-322 in all); this one is `P·(1 + 2^-30)`
+/// with at most five roundings, so at least `(1 − 2^-53)^5·(1 + 2^-30)·P`, plus `2F` rounded twice,
+/// less the same underflow allowance — larger, as `(1 − 2^-53)^5·(1 + 2^-30) > (1 + 2^-53)^10`
+/// and `2F·(1 − 2^-53)² − 1e-322 > F·(1 + 2^-53) + 1e-322`. Nothing overflows (`S, Z < 2^131` for
+/// f32 inputs). The tests check it on values of every magnitude.
+#[inline(always)]
+fn edge_bound(s: f64, zmax: f64) -> f64 {
+    s * (BOUND_SS * s + BOUND_SZ * zmax) + (BOUND_ZZ * (zmax * zmax) + 2.0 * EDGE_BOUND_FLOOR64)
+}
+
+/// The derivation's bound in its factored form, `S·(4u·S + 4e) + 2e²` with `e = u·(2S + 4Z)`,
+/// each factor rounded up, and the floor: what [`edge_bound`] must never be below.
+#[cfg(test)]
+fn derived_bound(s: f64, zmax: f64) -> f64 {
+    let e = (s + s + 4.0 * zmax) * K1;
+    (s * (K2 * s + 4.0 * e) + 2.0 * (e * e)) * BOUND_SLACK + EDGE_BOUND_FLOOR64
+}
+
 /// What the f64 stage could not settle about `t`: the exact stage rounds it.
 struct Undecided;
 
@@ -452,9 +492,7 @@ impl PreparedRay {
         let w = bx * ay - by * ax;
         let s = max_abs6([ax, ay, bx, by, cx, cy]);
         let zmax = max_abs3([az, bz, cz]);
-        let e = (s + s + 4.0 * zmax) * (U64 * BOUND_SLACK);
-        let bound = (s * ((4.0 * U64 * BOUND_SLACK) * s + 4.0 * e) + 2.0 * (e * e)) * BOUND_SLACK
-            + EDGE_BOUND_FLOOR64;
+        let bound = edge_bound(s, zmax);
         // `|` instead of `||`: the same truth value (no side effects), fewer branches.
         let pos = (u > bound) | (v > bound) | (w > bound);
         let neg = (u < -bound) | (v < -bound) | (w < -bound);

@@ -391,3 +391,31 @@ fn a_gathered_block_matches_one_set_lane_by_lane() {
         }
     }
 }
+
+/// `edge_bound` is at least the derivation's factored bound (`derived_bound`) on values of every
+/// magnitude the edge functions can give: zero, subnormal, tiny, huge (up to 2^131), exact powers
+/// of two and random mantissas, and `S`, `Z` far apart.
+#[test]
+fn the_expanded_bound_is_at_least_the_derived_one() {
+    let mut rng = SplitMix64::new(0xb0b0);
+    let value = |rng: &mut SplitMix64| -> f64 {
+        match rng.below(8) {
+            0 => 0.0,
+            1 => f64::from_bits(rng.next_u64() % (1 << 52)), // subnormal
+            2 => 2f64.powi(rng.below(1200) as i32 - 1074),
+            _ => {
+                let m = 1.0 + (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64;
+                m * 2f64.powi(rng.below(1150) as i32 - 1020)
+            }
+        }
+    };
+    for _ in 0..if cfg!(miri) { 1_000 } else { 2_000_000 } {
+        let (s, z) = (value(&mut rng), value(&mut rng));
+        let (s, z) = (s.min(2f64.powi(131)), z.min(2f64.powi(131)));
+        let (expanded, derived) = (super::edge_bound(s, z), super::derived_bound(s, z));
+        assert!(
+            expanded >= derived && expanded.is_finite(),
+            "s {s:e} z {z:e}: expanded {expanded:e} < derived {derived:e}"
+        );
+    }
+}
