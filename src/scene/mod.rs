@@ -520,9 +520,12 @@ impl Scene {
     /// the ray; up to 1 024). Once it holds 256, this call estimates the costs again from those
     /// rays instead of the library's samples (the report's estimates change, and W* with them),
     /// and a scene built with a known budget on the grid switches too when `rays_remaining` is at
-    /// least the new W* (or the new trial workload, `select::decision::Decision::Trial`): the renderer's own rays correct a decision made on samples that did not
-    /// look like them (a camera inside the scene, short occlusion rays). A kd-tree built then is
-    /// kept only if it saves work on those same rays.
+    /// least the new W* (or the new trial workload, `select::decision::Decision::Trial`): the
+    /// renderer's own rays correct a decision made on samples that did not look like them (a camera
+    /// inside the scene, short occlusion rays). A switch the tapped rays ask for waits for the next
+    /// batch: the tap starts over, and the switch comes at the first call whose batch's tapped rays
+    /// (256 or more) ask for it too; a batch that does not ask cancels it. A kd-tree built then is
+    /// kept only if it saves work on that batch's tapped rays.
     ///
     /// The kd-tree is built while the grid is still held (the memory limit must hold both); if
     /// that fails the scene stays on the grid, unchanged, and the error is returned.
@@ -554,6 +557,23 @@ impl Scene {
                         .builds_kd_tree()
             }
         };
+        // A switch the tapped rays ask for waits for the next batch to ask too: one batch may be
+        // unlike the rays that follow it (a renderer's primary rays across a nave, then short
+        // occlusion rays, for which the kd-tree saves far less: issue 14's interior case switched
+        // on its primary rays and paid a build the occlusion rays did not repay).
+        if let Some(tap) = self.tap.as_mut() {
+            match (tapped.is_some(), switch) {
+                (true, true) if !tap.asked => {
+                    tap.asked = true;
+                    tap.next_batch();
+                    return Ok(());
+                }
+                (true, false) => tap.asked = false,
+                // Too few of the next batch's rays tapped yet to agree or not.
+                (false, _) if tap.asked => return Ok(()),
+                _ => {}
+            }
+        }
         if !switch {
             return Ok(());
         }

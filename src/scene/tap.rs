@@ -34,6 +34,9 @@ pub struct QueryTap {
     rays: Vec<UnsafeCell<Ray>>,
     /// What the first `n` tapped rays did on the grid, once measured (`n`, features).
     pub measured: Option<(usize, SceneFeatures)>,
+    /// Whether the batch measured last asked for the kd-tree: [`crate::Scene::update`] switches
+    /// only when the next batch's rays, tapped afresh, ask too.
+    pub asked: bool,
     /// Slots reserved so far (may pass `rays.len()`: later offers are dropped).
     #[cfg(target_has_atomic = "ptr")]
     next: AtomicUsize,
@@ -63,6 +66,7 @@ impl QueryTap {
         Ok(Some(QueryTap {
             rays,
             measured: None,
+            asked: false,
             #[cfg(target_has_atomic = "ptr")]
             next: AtomicUsize::new(0),
         }))
@@ -108,8 +112,15 @@ impl QueryTap {
         n.min(self.rays.len())
     }
 
-    /// Forgets the rays taken, to collect new ones.
+    /// Forgets the rays taken and what a batch asked, to collect new ones.
     pub fn clear(&mut self) {
+        self.asked = false;
+        self.next_batch();
+    }
+
+    /// Forgets the rays taken (not what the last batch asked), so that the next batch's rays are
+    /// the ones tapped.
+    pub fn next_batch(&mut self) {
         self.measured = None;
         #[cfg(target_has_atomic = "ptr")]
         {

@@ -119,29 +119,27 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// The calibration compiled into the library: fitted by `cargo run --release --example calibrate
 /// -- --variant "kd build without grid references" --repeats 9` (its defaults: the bundled scenes
 /// plus the procedural set, 23 scenes) on the project's 2-core x86-64 VM (an Intel Xeon), refitted
-/// at stop 25 after the kd-tree's empty-space bonus went from 0.5 to 0.125 (0.94× the time per
-/// ray). Not refitted at stop 26, when the grid's line clip went four lanes wide (its fixed cost
-/// per ray 12–15 ns lower): a refit measured then (two runs within 1.6 %) put the grid's cost per
-/// ray at 76.3 ns instead of 89.4 and left the other constants within 4 %, and with it the interior
-/// case of issue 14 (docs/evaluation.md, "Interior camera"; the two structures now within 2 % per
-/// ray there) starts on the grid and switches at `rq_scene_update` on its tapped primary rays,
-/// which overstate the kd-tree's saving on the occlusion rays that follow (AUTO / better 1.074
-/// against 1.007 with these values): the refit waits for that switch to be fixed.
+/// at stop 27 after the grid's line clip went four lanes wide (stop 26) and the exact test's hit
+/// path got shorter (stop 27): the grid's fixed cost per ray 89.4 → 70.3 ns, a cell 14.7 → 13.8,
+/// a grid test 1.00 → 1.04; the kd-tree's per-ray terms 94.3 → 90.1 ns, 3.5 → 2.6 per grid cell,
+/// 1.61 → 1.63 per grid test; its build 23.9 → 24.8 ns per N·log2 N. A second run gave the per-ray
+/// constants within 3 % (a kd-tree's per grid cell 7 %) and the grid's build 13 % apart (the other
+/// core was building then). Stop 26 held the refit back: with a grid this much cheaper, issue
+/// 14's interior case (docs/evaluation.md, "Interior camera") starts on the grid and
+/// `rq_scene_update` switched on its tapped primary rays, which overstate the kd-tree's saving on
+/// the occlusion rays after them (AUTO / better 1.074–1.079); since stop 27 a switch the tapped
+/// rays ask for waits for a second batch to ask too, and the case stays on the grid (1.019).
 /// `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
-/// since stop 20). Two runs of 9 repeats gave constants within 2 % of each other (a cell 14.7 and
-/// 14.4 ns, a kd-tree build 23.9 and 24.2 ns per N·log2 N); this is the first. The grid's constants
-/// and both builds came out 14–26 % below stop 24's (the grid's code unchanged: the machine ran
-/// faster that day, which W*, a ratio of these constants, does not see); the kd-tree's per-ray
-/// terms 15–37 % (per grid cell 5.5 → 3.5), as its trees changed. The kd-tree's build is one term, 23.9 ns per
-/// N·log2 N (the median over the scenes): at stop 24, fitted with a second term per grid reference
+/// since stop 20). The kd-tree's build is one term, 24.8 ns per N·log2 N (the median over the
+/// scenes): at stop 24, fitted with a second term per grid reference
 /// per triangle as well (5.1 + 6.4 per reference), least squares pulled towards the cheap Sierpinski
 /// tetrahedra and the dear slivers and predicted 0.58–0.76× the build on 19 of 29 of the
 /// evaluation's scenes (median error 32 %, against the builds measured by the evaluation that
 /// docs/evaluation.md then held, out of sample for most), where the one term was off by a median
 /// 14 % (0.12 on slivers-2k and 0.61 on hair-50k, whose kd-trees are slower per ray than the grid
 /// anyway, and 2.4–2.5 on the tetrahedra; all stop 24's figures). Until stop 23 the build was
-/// 16.0 ns per N·log2 N per grid reference per triangle. The kd-tree per ray is 94.3 ns plus 3.5
+/// 16.0 ns per N·log2 N per grid reference per triangle. The kd-tree per ray is 90.1 ns plus 2.6
 /// per grid cell and 1.6 per grid test; it follows the rays (a camera inside a building makes both
 /// structures' estimates grow). The grid and the kd-tree are within a few percent per ray on many
 /// of these scenes, so W*'s leave-one-out error is dominated by scenes whose W* is infinite on one
@@ -152,15 +150,15 @@ pub const BUILTIN: Calibration = Calibration {
     machine: 0,
     build: 0,
     values: [
-        33.39161392404597,
-        89.37407056924447,
-        14.670449949627365,
-        1.0007357878846577,
-        23.91730270825182,
+        32.809349593495924,
+        70.33959628055719,
+        13.756987552769656,
+        1.0422610862379011,
+        24.769889094378684,
         0.0,
-        94.25280972080802,
-        3.48500978007364,
-        1.6141978618836925,
+        90.12254656266109,
+        2.589262811017535,
+        1.626905755161051,
     ],
 };
 
