@@ -488,25 +488,18 @@ fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
     let mesh = mesh_of(&data);
     let camera = test_rays(&mesh, 200, 0, 3);
     let mut unlike = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
-    for r in &rays {
-        unlike.intersect(r);
-    }
-    unlike.update(rays.len() as u64, budget).unwrap();
-    for r in &camera {
-        unlike.intersect(r);
-    }
-    unlike.update(camera.len() as u64, budget).unwrap();
-    assert_eq!(unlike.report().structure, Structure::Grid);
-    for r in &rays {
-        unlike.intersect(r);
-    }
-    unlike.update(rays.len() as u64, budget).unwrap();
-    assert_eq!(unlike.report().structure, Structure::Grid);
-    for r in &rays {
-        unlike.intersect(r);
-    }
-    unlike.update(rays.len() as u64, budget).unwrap();
-    assert_eq!(unlike.report().structure, Structure::KdTree);
+    // Traces one batch, tells the scene, and says what it holds then.
+    let mut batch = |batch: &[rayq::Ray]| {
+        for r in batch {
+            unlike.intersect(r);
+        }
+        unlike.update(batch.len() as u64, budget).unwrap();
+        unlike.report().structure
+    };
+    assert_eq!(batch(&rays), Structure::Grid);
+    assert_eq!(batch(&camera), Structure::Grid);
+    assert_eq!(batch(&rays), Structure::Grid);
+    assert_eq!(batch(&rays), Structure::KdTree);
     // The same rays again: the second batch agrees, and the kd-tree is built.
     for r in &rays {
         scene.intersect(r);
