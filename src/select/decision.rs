@@ -50,9 +50,15 @@ impl Decision {
 /// the regret of no trials (geometric mean 1.016–1.017, worst 1.32 in two runs) and 1/16 built a
 /// trial on slivers-2k at 3·10⁴ rays whose build the estimate puts at a tenth of its time (worst
 /// 1.38). Once the work limit was lowered (below) that trial stops sooner, and in the three runs after
-/// it 1/16 and 1/32 had the same worst case (1.30–1.31) and regret within 0.001: 1/32 stays, the
-/// cheaper insurance, though on these scenes its trials change no decision's cost.
-pub const TRIAL_SHARE: f64 = 1.0 / 32.0;
+/// it 1/16 and 1/32 had the same worst case (1.30–1.31) and regret within 0.001: 1/32 stayed, the
+/// cheaper insurance. 1/16 again since stop 27: in that stop's four evaluation runs its trials
+/// reached sphereflake-1M at 10⁷–3·10⁷ rays (the kd-tree 1.3–1.5× faster per ray there, a million
+/// triangles whose grid misses the cache, which the estimate does not see), worst regret 1.42, 1.37,
+/// 1.40, 1.375 against 1.51, 1.43, 1.41, 1.375 with 1/32, and the geometric mean 0.001 lower in
+/// each (1.021–1.023); the trials built 46–52 of 341 budgets against 34–40. In a fifth run, with
+/// 1/16 built in, the worst was the same at every share from 0 to 1/16 (tetra-10k 1.39) and 1/16's
+/// trial on slivers-2k at 3·10⁴ rays came back (1.29: its build estimated at a tenth).
+pub const TRIAL_SHARE: f64 = 1.0 / 16.0;
 
 impl CostEstimate {
     /// True when every estimate is a number ≥ 0 (infinities allowed).
@@ -417,13 +423,14 @@ mod tests {
         assert_eq!(e.decide(999), Decision::BelowBreakEven);
         assert_eq!(e.decide(1000), Decision::AboveBreakEven);
         assert_eq!(e.decide(u64::MAX), Decision::AboveBreakEven);
-        // No saving: the grid, until the build is a thirty-second of the grid's time (32 000 rays).
+        // No saving: the grid, until the build is a sixteenth of the grid's time (16 000 rays).
+        assert_eq!(TRIAL_SHARE, 1.0 / 16.0);
         assert_eq!(
-            est(1e-6, 1e-6, 1e-3).decide(31_999),
+            est(1e-6, 1e-6, 1e-3).decide(15_999),
             Decision::GridFasterPerRay
         );
-        // (1e-3 / (1e-6 / 32) rounds a hair above 32 000.)
-        assert_eq!(est(1e-6, 1e-6, 1e-3).decide(32_001), Decision::Trial);
+        // (1e-3 / (1e-6 / 16) may round a hair above 16 000.)
+        assert_eq!(est(1e-6, 1e-6, 1e-3).decide(16_001), Decision::Trial);
         assert_eq!(est(1e-6, 1e-6, 1e-3).decide(u64::MAX), Decision::Trial);
         // A free build is always worth a trial.
         assert_eq!(est(1e-6, 2e-6, 0.0).decide(1), Decision::Trial);
@@ -490,23 +497,24 @@ mod tests {
 
     #[test]
     fn a_trial_comes_where_the_build_is_cheap_against_the_grid() {
-        // No saving estimated: W* = ∞, the trial at 32·2000/1 = 64 000 rays.
+        // No saving estimated: W* = ∞, the trial at 16·2000/1 = 32 000 rays.
+        assert_eq!(TRIAL_SHARE, 1.0 / 16.0);
         let e = est(1.0, 2.0, 2000.0);
         assert_eq!(e.break_even_rays(), f64::INFINITY);
-        assert_eq!(e.trial_rays(), 64_000.0);
-        assert_eq!(e.build_rays(), 64_000.0);
-        assert_eq!(e.decide(63_999), Decision::GridFasterPerRay);
-        assert_eq!(e.decide(64_000), Decision::Trial);
-        // A small saving: W* = 20 000 before the trial's 64 000.
+        assert_eq!(e.trial_rays(), 32_000.0);
+        assert_eq!(e.build_rays(), 32_000.0);
+        assert_eq!(e.decide(31_999), Decision::GridFasterPerRay);
+        assert_eq!(e.decide(32_000), Decision::Trial);
+        // A small saving: W* = 20 000 before the trial's 32 000.
         let small = est(1.0, 0.9, 2000.0);
-        assert_eq!(small.trial_rays(), 64_000.0);
+        assert_eq!(small.trial_rays(), 32_000.0);
         let w = small.break_even_rays();
         assert!((w - 20_000.0).abs() < 1e-6, "{w}");
         assert_eq!(small.decide(19_000), Decision::BelowBreakEven);
         assert_eq!(small.decide(20_001), Decision::AboveBreakEven);
         let smaller = est(1.0, 0.99, 2000.0);
-        assert_eq!(smaller.decide(63_999), Decision::BelowBreakEven);
-        assert_eq!(smaller.decide(64_000), Decision::Trial);
+        assert_eq!(smaller.decide(31_999), Decision::BelowBreakEven);
+        assert_eq!(smaller.decide(32_000), Decision::Trial);
         // A big saving: W* comes first and the trial never matters.
         let big = est(3.0, 1.0, 2000.0);
         assert_eq!(big.build_rays(), 1000.0);
@@ -520,10 +528,10 @@ mod tests {
         assert_eq!(est(1.0, 2.0, 0.0).trial_rays(), 0.0);
         // The online rule switches at the trial too.
         let mut rule = OnlineSwitch::new(e);
-        assert!(!rule.record(63_999));
+        assert!(!rule.record(31_999));
         assert!(rule.record(1));
         // An upper bound below the trial workload: never.
-        assert!(!OnlineSwitch::at_most(e, 63_999).may_pay_back());
+        assert!(!OnlineSwitch::at_most(e, 31_999).may_pay_back());
     }
 
     #[test]
