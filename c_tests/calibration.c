@@ -49,11 +49,11 @@ static void test_blob_file(const char *path, const unsigned char *builtin_blob, 
     if (budgets[i] == 0) {
       CHECK(r.outcome == RQ_OUTCOME_ONLINE_ON_GRID && r.structure == RQ_STRUCTURE_GRID);
     } else if (r.outcome == RQ_OUTCOME_ABOVE_BREAK_EVEN) {
-      /* At W*, or as a trial: the build at most 1/32 of the grid's estimated trace time (README,
+      /* At W*, or as a trial: the build at most 1/16 of the grid's estimated trace time (README,
          "How well it chooses"). */
       CHECK(r.structure == RQ_STRUCTURE_KDTREE &&
             ((double)budgets[i] >= r.break_even_rays ||
-             (double)budgets[i] * r.grid_ray_seconds >= 32.0 * r.kd_build_seconds));
+             (double)budgets[i] * r.grid_ray_seconds >= 16.0 * r.kd_build_seconds));
     } else {
       CHECKF(r.structure == RQ_STRUCTURE_GRID &&
                  (r.outcome == RQ_OUTCOME_GRID_FASTER_PER_RAY || (double)budgets[i] < r.break_even_rays),

@@ -709,10 +709,12 @@ rq_status rq_scene_report_get(const struct rq_scene *scene, struct rq_scene_repo
 // least W* (outcome ONLINE_SWITCHED). While AUTO holds the grid the scene keeps about one query in
 // 64 (by a hash of the ray, up to 1 024); once it holds 256, this call estimates the costs from
 // those rays instead of the library's samples (the report's estimates and W* change), and a scene
-// built with a known budget switches too when `rays_remaining` is at least the new W*. A switch
-// the tapped rays ask for waits for the next batch: the tap starts over, and the switch comes at
-// the first call whose batch's tapped rays ask for it too (a batch that does not ask cancels it),
-// keeping the kd-tree only if it saves work on those rays. The kd-tree is built while the grid is still
+// built with a known budget switches too when `rays_remaining` is at least the new W*. From the
+// first batch measured so, every switch waits for a batch's tapped rays to agree: each measured
+// batch starts the tap over, and the switch comes at the first call whose batch (256 tapped rays
+// or more, about 16 000 queries) asks for it after one that asked too; a batch that does not ask
+// cancels it. Meanwhile the report may show a W* below `rays_remaining` with the grid held. The
+// kd-tree is kept only if it saves work on the last batch's tapped rays. The kd-tree is built while the grid is still
 // held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
 // build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
 // unchanged and usable.

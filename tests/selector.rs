@@ -483,10 +483,12 @@ fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
         .update(rays.len() as u64, budget - rays.len() as u64)
         .unwrap();
     assert_eq!(scene.report().structure, Structure::Grid);
-    // A next batch unlike the first (from outside, as the samples) cancels it; one like the
-    // first then asks again, and the one after it switches.
+    // A next batch unlike the first (from outside, as the samples) cancels it, even one that fills
+    // the tap (1 024 rays: the camera rays twice, a ray is always tapped or not alike); one like
+    // the first then asks again, and the one after it switches: each batch is heard on its own.
     let mesh = mesh_of(&data);
     let camera = test_rays(&mesh, 200, 0, 3);
+    let twice: Vec<rayq::Ray> = camera.iter().chain(&camera).copied().collect();
     let mut unlike = Scene::build(&data.as_source(), &auto(budget), &cal).unwrap();
     // Traces one batch, tells the scene, and says what it holds then.
     let mut batch = |batch: &[rayq::Ray]| {
@@ -497,7 +499,7 @@ fn tapped_queries_correct_a_decision_the_samples_got_wrong() {
         unlike.report().structure
     };
     assert_eq!(batch(&rays), Structure::Grid);
-    assert_eq!(batch(&camera), Structure::Grid);
+    assert_eq!(batch(&twice), Structure::Grid);
     assert_eq!(batch(&rays), Structure::Grid);
     assert_eq!(batch(&rays), Structure::KdTree);
     // The same rays again: the second batch agrees, and the kd-tree is built.
@@ -601,6 +603,16 @@ fn an_interior_occlusion_workload_does_not_switch_on_its_primary_rays() {
         r.break_even_rays
     );
     assert_eq!(r.structure, Structure::Grid);
+    // A second batch of the same rays agrees, and the scene switches: the first batch alone was
+    // what waited.
+    for ray in &primary {
+        scene.intersect(ray);
+    }
+    scene.update(traced, small - 2 * traced).unwrap();
+    assert_eq!(
+        (scene.report().structure, scene.report().outcome),
+        (Structure::KdTree, Outcome::OnlineSwitched)
+    );
 }
 
 /// The teapot in a stadium (a sphere of 15 000 triangles on a 1000 × 600 field): the grid, sized

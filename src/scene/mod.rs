@@ -522,10 +522,11 @@ impl Scene {
     /// and a scene built with a known budget on the grid switches too when `rays_remaining` is at
     /// least the new W* (or the new trial workload, `select::decision::Decision::Trial`): the
     /// renderer's own rays correct a decision made on samples that did not look like them (a camera
-    /// inside the scene, short occlusion rays). A switch the tapped rays ask for waits for the next
-    /// batch: the tap starts over, and the switch comes at the first call whose batch's tapped rays
-    /// (256 or more) ask for it too; a batch that does not ask cancels it. A kd-tree built then is
-    /// kept only if it saves work on that batch's tapped rays.
+    /// inside the scene, short occlusion rays). From the first batch measured so, every switch
+    /// waits for a batch's tapped rays to agree: each measured batch starts the tap over, and the
+    /// switch comes at the first call whose batch's tapped rays (256 or more) ask for it after a
+    /// batch that asked too; a batch that does not ask cancels it. A kd-tree built then is kept
+    /// only if it saves work on that batch's tapped rays.
     ///
     /// The kd-tree is built while the grid is still held (the memory limit must hold both); if
     /// that fails the scene stays on the grid, unchanged, and the error is returned.
@@ -560,7 +561,8 @@ impl Scene {
         // A switch the tapped rays ask for waits for the next batch to ask too: one batch may be
         // unlike the rays that follow it (a renderer's primary rays across a nave, then short
         // occlusion rays, for which the kd-tree saves far less: issue 14's interior case switched
-        // on its primary rays and paid a build the occlusion rays did not repay).
+        // on its primary rays and paid a build the occlusion rays did not repay). Each measured
+        // batch starts the tap over, so that every batch is heard on its own rays.
         if let Some(tap) = self.tap.as_mut() {
             match (tapped.is_some(), switch) {
                 (true, true) if !tap.asked => {
@@ -568,9 +570,13 @@ impl Scene {
                     tap.next_batch();
                     return Ok(());
                 }
-                (true, false) => tap.asked = false,
-                // Too few of the next batch's rays tapped yet to agree or not.
-                (false, _) if tap.asked => return Ok(()),
+                (true, false) => {
+                    tap.asked = false;
+                    tap.next_batch();
+                }
+                // Too few of the next batch's rays tapped yet to agree or not: the estimate is a
+                // batch's already heard, and no switch comes from it alone.
+                (false, _) if tap.asked || tap.heard => return Ok(()),
                 _ => {}
             }
         }
@@ -633,6 +639,7 @@ impl Scene {
         }
         let features = sample_grid(grid, &self.mesh, Some(&tap.rays()), &self.options.samples);
         tap.measured = Some((taken, features));
+        tap.heard = true;
         let estimate = self.calibration.estimate(&features);
         self.take_estimate(Some(&estimate));
         if let Some(rule) = self.online.as_mut() {

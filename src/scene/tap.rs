@@ -37,6 +37,9 @@ pub struct QueryTap {
     /// Whether the batch measured last asked for the kd-tree: [`crate::Scene::update`] switches
     /// only when the next batch's rays, tapped afresh, ask too.
     pub asked: bool,
+    /// Whether a batch was measured since the tap was taken (or cleared): from then on the scene's
+    /// estimate is the tapped rays', and a switch waits for a measured batch to agree.
+    pub heard: bool,
     /// Slots reserved so far (may pass `rays.len()`: later offers are dropped).
     #[cfg(target_has_atomic = "ptr")]
     next: AtomicUsize,
@@ -67,6 +70,7 @@ impl QueryTap {
             rays,
             measured: None,
             asked: false,
+            heard: false,
             #[cfg(target_has_atomic = "ptr")]
             next: AtomicUsize::new(0),
         }))
@@ -112,14 +116,15 @@ impl QueryTap {
         n.min(self.rays.len())
     }
 
-    /// Forgets the rays taken and what a batch asked, to collect new ones.
+    /// Forgets the rays taken and what batches said, to collect new ones.
     pub fn clear(&mut self) {
         self.asked = false;
+        self.heard = false;
         self.next_batch();
     }
 
-    /// Forgets the rays taken (not what the last batch asked), so that the next batch's rays are
-    /// the ones tapped.
+    /// Forgets the rays taken (not what batches said), so that the next batch's rays are the ones
+    /// tapped.
     pub fn next_batch(&mut self) {
         self.measured = None;
         #[cfg(target_has_atomic = "ptr")]

@@ -228,8 +228,12 @@ pub fn kd_tree_confirmed_at(
     kd: &SceneFeatures,
     prices: &CheckPrices,
 ) -> bool {
-    let (grid_cost, kd_cost) = priced_work(calibration, grid, kd, prices);
-    kd.rays == 0 || kd_cost < grid_cost || grid.has_heavy_cell()
+    let [grid_cost, kd_cost] = priced_parts(calibration, grid, kd, prices);
+    // The fixed costs' difference apart from the work's: with equal fixed costs it is exactly 0,
+    // and the verdict is the comparison of the work alone, rounded as before they were priced.
+    let fixed = kd_cost[0] - grid_cost[0];
+    let work = kd_cost[1] - grid_cost[1];
+    kd.rays == 0 || fixed + work < 0.0 || grid.has_heavy_cell()
 }
 
 /// The time per ray of the same rays on the grid (`grid`) and on the kd-tree (`kd`, whose `cells`
@@ -243,14 +247,27 @@ pub fn priced_work(
     kd: &SceneFeatures,
     prices: &CheckPrices,
 ) -> (f64, f64) {
+    let [grid_cost, kd_cost] = priced_parts(calibration, grid, kd, prices);
+    (grid_cost[0] + grid_cost[1], kd_cost[0] + kd_cost[1])
+}
+
+/// [`priced_work`]'s two structures, each as its fixed cost per ray and its counted work.
+fn priced_parts(
+    calibration: &Calibration,
+    grid: &SceneFeatures,
+    kd: &SceneFeatures,
+    prices: &CheckPrices,
+) -> [[f64; 2]; 2] {
     // The grid model's constants, in its term order: fixed, per cell step, per test.
     let grid_ray = Part::GridRay.constants().start;
     let [fixed, cell, test] = [0, 1, 2].map(|k| calibration.value(grid_ray + k));
-    let grid_cost = Part::GridRay.predict(calibration, grid);
-    let kd_cost = prices.fixed_per_grid_fixed * fixed
-        + prices.node_per_cell_step * cell * kd.cells_per_ray()
+    let grid_work = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
+    let kd_work = prices.node_per_cell_step * cell * kd.cells_per_ray()
         + prices.test_per_grid_test * test * kd.tests_per_ray();
-    (grid_cost, kd_cost)
+    [
+        [fixed, grid_work],
+        [prices.fixed_per_grid_fixed * fixed, kd_work],
+    ]
 }
 
 /// How much work [`kd_tree_work_limit`] lets a kd-tree build do, per `N·log2 N`, before the
@@ -414,6 +431,47 @@ mod tests {
                 "{triangles} triangles, largest cell {largest}"
             );
         }
+    }
+
+    /// The check prices the grid's ray with the calibration's grid model (fixed 50, a cell 4, a
+    /// test 2 here) and the kd-tree's with its prices relative to those constants, and with equal
+    /// fixed costs the verdict is the comparison of the work alone, even at a tie.
+    #[test]
+    fn the_check_prices_both_rays_from_the_grid_model() {
+        let cal = Calibration::new(0, [1.0, 50.0, 4.0, 2.0, 1.0, 0.0, 1.0, 0.0, 0.0]).unwrap();
+        let grid = SceneFeatures {
+            triangles: 1000,
+            rays: 10,
+            cells: 30,
+            tests: 200,
+            ..SceneFeatures::default()
+        };
+        let kd = SceneFeatures {
+            cells: 100,
+            tests: 80,
+            ..grid
+        };
+        let prices = CheckPrices {
+            fixed_per_grid_fixed: 0.5,
+            node_per_cell_step: 0.25,
+            test_per_grid_test: 1.5,
+        };
+        // Grid: 50 + 4·3 + 2·20 = 102; kd-tree: 25 + 0.25·4·10 + 1.5·2·8 = 59.
+        assert_eq!(priced_work(&cal, &grid, &kd, &prices), (102.0, 59.0));
+        assert!(kd_tree_confirmed_at(&cal, &grid, &kd, &prices));
+        // Equal fixed costs and equal work: a tie keeps the grid.
+        let tie = CheckPrices {
+            fixed_per_grid_fixed: 1.0,
+            node_per_cell_step: 0.0,
+            test_per_grid_test: 1.0,
+        };
+        let same_tests = SceneFeatures {
+            cells: 0,
+            tests: 260,
+            ..grid
+        };
+        // Grid work 4·3 + 2·20 = 52; kd-tree work 2·26 = 52.
+        assert!(!kd_tree_confirmed_at(&cal, &grid, &same_tests, &tie));
     }
 
     #[test]

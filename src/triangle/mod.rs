@@ -310,8 +310,9 @@ const BOUND_ZZ: f64 = BOUND_SLACK * (32.0 * K1 * K1) * EXPANDED_MARGIN;
 /// roundings of non-negative values, so at most `(1 + 2^-53)^10·P` plus its floor `F` (1e-300)
 /// rounded once, plus what underflow adds (at most 2^-1075 an operation, and only to products so
 /// small that later factors cannot enlarge them: under 1e-322 in all); this one is `P·(1 + 2^-30)`
-/// with at most five roundings, so at least `(1 − 2^-53)^5·(1 + 2^-30)·P`, plus `2F` rounded twice,
-/// less the same underflow allowance — larger, as `(1 − 2^-53)^5·(1 + 2^-30) > (1 + 2^-53)^10`
+/// with at most seven roundings on any term (four at run time, three in its constant), so at least
+/// `(1 − 2^-53)^7·(1 + 2^-30)·P`, plus `2F` rounded twice, less the same underflow allowance —
+/// larger, as `(1 − 2^-53)^7·(1 + 2^-30) > (1 + 2^-53)^10` (the margin would cover millions)
 /// and `2F·(1 − 2^-53)² − 1e-322 > F·(1 + 2^-53) + 1e-322`. Nothing overflows (`S, Z < 2^131` for
 /// f32 inputs). The tests check it on values of every magnitude.
 #[inline(always)]
