@@ -564,22 +564,15 @@ fn an_interior_occlusion_workload_does_not_switch_on_its_primary_rays() {
         return;
     };
     let (small, large) = (1_533_784, 5_213_536);
-    let big = Scene::build(&data.as_source(), &auto(large), Calibration::builtin()).unwrap();
-    let r = big.report();
-    assert_eq!(
-        (r.structure, r.outcome),
-        (Structure::KdTree, Outcome::AboveBreakEven),
-        "W* {}",
-        r.break_even_rays
-    );
-    let mut scene = Scene::build(&data.as_source(), &auto(small), Calibration::builtin()).unwrap();
-    let r = scene.report();
-    assert_eq!(
-        (r.structure, r.outcome),
-        (Structure::Grid, Outcome::BelowBreakEven),
-        "W* {}",
-        r.break_even_rays
-    );
+    // A scene built for `rays` with the default samples, checked to hold `want`.
+    let built = |rays: u64, want: (Structure, Outcome)| {
+        let scene = Scene::build(&data.as_source(), &auto(rays), Calibration::builtin()).unwrap();
+        let r = scene.report();
+        assert_eq!((r.structure, r.outcome), want, "W* {}", r.break_even_rays);
+        scene
+    };
+    built(large, (Structure::KdTree, Outcome::AboveBreakEven));
+    let mut scene = built(small, (Structure::Grid, Outcome::BelowBreakEven));
     // The camera inside the nave, looking along it (examples/evaluate/interior.rs).
     let eye = glam::Vec3::new(-14.0, -9.0, 0.0);
     let (w, h) = (160, 120);

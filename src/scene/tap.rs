@@ -2,7 +2,8 @@
 //! threads share no counter to choose), is copied into a fixed buffer until the buffer is full.
 //! [`crate::Scene::update`] traces those rays through the structures to correct a decision made
 //! on the library's sample rays, which see the scene from outside and may not look like the
-//! renderer's rays (a camera inside a building, short occlusion rays).
+//! renderer's rays (a camera inside a building, short occlusion rays). Each `update` that measures
+//! the tapped rays starts the buffer over, so that every batch of queries is judged on its own.
 //!
 //! Queries never allocate: the buffer is taken when the scene is built. A query that is tapped
 //! reserves a slot with one atomic add and writes its ray there; the buffer is read only by

@@ -183,9 +183,10 @@ impl CheckPrices {
     /// time per ray ([`crate::select::fit::fit_check_prices`], docs/evaluation.md fits them on
     /// every run) gave at stop 27 a fixed cost 0.62 of the grid's, a node 0.53 of a cell step and a
     /// test 1.47 grid tests, close to the times measured apart (`raycost floor`; stop 25's
-    /// regression on the workload's own counts): they keep the faster structure on 27–29 of 31
-    /// scenes in runs that did not fit them, where these keep it on 22, and the regret's geometric
-    /// mean went 1.020 → 1.016. But they drop sibenik's kd-tree, 7 % slower from the evaluation's
+    /// regression on the workload's own counts): they kept the faster structure on 29 of 31 scenes
+    /// in the run that fitted them and 24–27 in the seven runs after (these prices: 21–23), and in
+    /// the one run that used them in the library the regret's geometric mean was 1.016 (1.020–1.024
+    /// in the runs with these). But they drop sibenik's kd-tree, 7 % slower from the evaluation's
     /// outside view, which issue 14's interior case (the camera in the nave, the library's default
     /// samples) needs: AUTO / better went 1.009 → 1.154 (4 occlusion rays a hit) and 1.003 → 1.052
     /// (16), the grid traced the primary rays and `rq_scene_update` built the kd-tree again. Sample
@@ -204,8 +205,8 @@ impl CheckPrices {
 
 /// The check after a kd-tree was built on an estimate: keep it only if its time per ray on the
 /// sample rays, priced from their counted work ([`priced_work`] with [`CheckPrices::LIBRARY`]), is
-/// below the grid's on the same rays (`grid` and `kd` from
-/// [`crate::select::sample::sample_grid`] and [`crate::select::sample::sample_kdtree`]). Where the kd-tree does not save work (long slivers
+/// below the grid's on the same rays (`grid` and `kd` from [`crate::select::sample::sample_grid`]
+/// and [`crate::select::sample::sample_kdtree`]). Where the kd-tree does not save work (long slivers
 /// it cannot separate, soups of overlapping triangles, scenes that are nearly empty space for the
 /// grid), it is slower per ray whatever the estimate said, and the grid stays. No kd samples
 /// confirm nothing to the contrary. A grid with a heavy cell ([`SceneFeatures::has_heavy_cell`])
@@ -251,6 +252,13 @@ pub fn priced_work(
     (grid_cost[0] + grid_cost[1], kd_cost[0] + kd_cost[1])
 }
 
+/// The calibration's grid model per ray, in its term order: the fixed cost, a cell step, a test
+/// (nanoseconds); the constants the check's prices are relative to.
+pub(crate) fn grid_ray_constants(calibration: &Calibration) -> [f64; 3] {
+    let first = Part::GridRay.constants().start;
+    [0, 1, 2].map(|k| calibration.value(first + k))
+}
+
 /// [`priced_work`]'s two structures, each as its fixed cost per ray and its counted work.
 fn priced_parts(
     calibration: &Calibration,
@@ -258,9 +266,7 @@ fn priced_parts(
     kd: &SceneFeatures,
     prices: &CheckPrices,
 ) -> [[f64; 2]; 2] {
-    // The grid model's constants, in its term order: fixed, per cell step, per test.
-    let grid_ray = Part::GridRay.constants().start;
-    let [fixed, cell, test] = [0, 1, 2].map(|k| calibration.value(grid_ray + k));
+    let [fixed, cell, test] = grid_ray_constants(calibration);
     let grid_work = cell * grid.cells_per_ray() + test * grid.tests_per_ray();
     let kd_work = prices.node_per_cell_step * cell * kd.cells_per_ray()
         + prices.test_per_grid_test * test * kd.tests_per_ray();

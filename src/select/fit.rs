@@ -3,7 +3,7 @@
 //! the rest refitted. Pure arithmetic: works in `no_std`, so a renderer can calibrate in-process.
 
 use super::calibration::{Calibration, CONSTANTS, CONSTANT_COUNT};
-use super::decision::{CheckPrices, CostEstimate};
+use super::decision::{grid_ray_constants, priced_work, CheckPrices, CostEstimate};
 use super::model::{Part, SceneFeatures, MAX_TERMS};
 use alloc::vec::Vec;
 
@@ -234,8 +234,7 @@ pub fn fit_check_prices(
     observations: &[CheckObservation],
     calibration: &Calibration,
 ) -> Option<CheckPrices> {
-    let grid_ray = Part::GridRay.constants().start;
-    let [fixed, cell, test] = [0, 1, 2].map(|k| calibration.value(grid_ray + k));
+    let [fixed, cell, test] = grid_ray_constants(calibration);
     let usable = |o: &&CheckObservation| {
         o.grid.rays > 0
             && o.kd.rays > 0
@@ -255,7 +254,9 @@ pub fn fit_check_prices(
             cell * o.kd.cells_per_ray(),
             test * o.kd.tests_per_ray(),
         ];
-        let y = Part::GridRay.predict(calibration, &o.grid) + (o.kd_ray_ns - o.grid_ray_ns);
+        // The grid's side, which no price of the kd-tree's changes.
+        let (grid_priced, _) = priced_work(calibration, &o.grid, &o.kd, &CheckPrices::LIBRARY);
+        let y = grid_priced + (o.kd_ray_ns - o.grid_ray_ns);
         for i in 0..MAX_TERMS {
             b[i] += terms[i] * y;
             for j in 0..MAX_TERMS {
