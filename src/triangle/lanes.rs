@@ -11,6 +11,7 @@ pub(crate) trait Lanes: Copy {
     fn add(self, o: Self) -> Self;
     fn sub(self, o: Self) -> Self;
     fn mul(self, o: Self) -> Self;
+    fn div(self, o: Self) -> Self;
     /// The larger of each pair. NaN handling differs between implementations (SSE2 and the plain
     /// version return `o`, NEON returns NaN); the filter meets NaN only in unused lanes, NaN
     /// throughout, which every version rejects (real triangles give no NaN below 2^60).
@@ -23,6 +24,10 @@ pub(crate) trait Lanes: Copy {
     fn nle(self, o: Self) -> Self::Mask;
     /// Set where `self < o` or either is NaN (`!(self >= o)`).
     fn nge(self, o: Self) -> Self::Mask;
+    /// Set where `self > o` (clear where either is NaN).
+    fn gt(self, o: Self) -> Self::Mask;
+    /// Set where `self < o` (clear where either is NaN).
+    fn lt(self, o: Self) -> Self::Mask;
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Bit `k` set where lane `k` of the mask is set.
     fn bits(m: Self::Mask) -> u32;
@@ -70,6 +75,10 @@ impl Lanes for Portable {
         self.map2(o, |a, b| a * b)
     }
     #[inline(always)]
+    fn div(self, o: Self) -> Self {
+        self.map2(o, |a, b| a / b)
+    }
+    #[inline(always)]
     fn max(self, o: Self) -> Self {
         self.map2(o, |a, b| if a > b { a } else { b })
     }
@@ -92,6 +101,14 @@ impl Lanes for Portable {
     #[inline(always)]
     fn nge(self, o: Self) -> u32 {
         self.cmp(o, |a, b| !(a >= b))
+    }
+    #[inline(always)]
+    fn gt(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| a > b)
+    }
+    #[inline(always)]
+    fn lt(self, o: Self) -> u32 {
+        self.cmp(o, |a, b| a < b)
     }
 
     #[inline(always)]
@@ -148,6 +165,10 @@ mod sse2 {
             Sse2(unsafe { _mm_mul_ps(self.0, o.0) })
         }
         #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            Sse2(unsafe { _mm_div_ps(self.0, o.0) })
+        }
+        #[inline(always)]
         fn max(self, o: Self) -> Self {
             Sse2(unsafe { _mm_max_ps(self.0, o.0) })
         }
@@ -170,6 +191,14 @@ mod sse2 {
         #[inline(always)]
         fn nge(self, o: Self) -> __m128 {
             unsafe { _mm_cmpnge_ps(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> __m128 {
+            unsafe { _mm_cmpgt_ps(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> __m128 {
+            unsafe { _mm_cmplt_ps(self.0, o.0) }
         }
 
         #[inline(always)]
@@ -220,6 +249,10 @@ mod neon {
             Neon(unsafe { vmulq_f32(self.0, o.0) })
         }
         #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            Neon(unsafe { vdivq_f32(self.0, o.0) })
+        }
+        #[inline(always)]
         fn max(self, o: Self) -> Self {
             Neon(unsafe { vmaxq_f32(self.0, o.0) })
         }
@@ -242,6 +275,14 @@ mod neon {
         #[inline(always)]
         fn nge(self, o: Self) -> uint32x4_t {
             unsafe { vmvnq_u32(vcgeq_f32(self.0, o.0)) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> uint32x4_t {
+            unsafe { vcgtq_f32(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> uint32x4_t {
+            unsafe { vcltq_f32(self.0, o.0) }
         }
 
         #[inline(always)]

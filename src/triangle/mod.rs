@@ -132,7 +132,7 @@ pub(crate) struct Kernel<'a, const KZ: usize, const SWAP: bool>(
 impl<'a, const KZ: usize, const SWAP: bool> Kernel<'a, KZ, SWAP> {
     #[inline(always)]
     fn new(ray: &'a PreparedRay, accept: Option<&'a dyn Accept>) -> Self {
-        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32, ray.reach);
+        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray);
         Kernel(ray, accept, lanes)
     }
 }
@@ -173,7 +173,7 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
     #[inline(always)]
     fn any_axes(&self) -> AnyKernel<'_> {
         let ray = self.0;
-        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray.org, ray.sx32, ray.sy32, ray.reach);
+        let lanes = filter::FilterRay::new::<KZ, SWAP>(ray);
         AnyKernel(ray, self.1, lanes)
     }
 }

@@ -244,38 +244,13 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             .flat_map(|k| block.get(k))
             .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
         let r = r.for_scene(scale);
-        let kz = usize::from(r.axes / 2);
-        let swap = r.axes % 2 == 1;
-        let run = |portable: bool| -> u32 {
-            fn with<L: Lanes, const KZ: usize, const SWAP: bool>(
-                r: &PreparedRay,
-                block: &Block4,
-            ) -> u32 {
-                let ray = filter::FilterRay::<L>::new::<KZ, SWAP>(r.org, r.sx32, r.sy32, r.reach);
-                filter::survivors::<L, KZ, SWAP>(&ray, block)
-            }
-            macro_rules! go {
-                ($l:ty) => {
-                    match (kz, swap) {
-                        (0, false) => with::<$l, 0, false>(&r, &block),
-                        (0, true) => with::<$l, 0, true>(&r, &block),
-                        (1, false) => with::<$l, 1, false>(&r, &block),
-                        (1, true) => with::<$l, 1, true>(&r, &block),
-                        (2, false) => with::<$l, 2, false>(&r, &block),
-                        _ => with::<$l, 2, true>(&r, &block),
-                    }
-                };
-            }
-            if portable {
-                go!(Portable)
-            } else {
-                go!(F4)
-            }
-        };
         if !r.filter_ok {
             continue;
         }
-        let (vector, plain) = (run(false), run(true));
+        let (vector, plain) = (
+            filter_lanes::<F4>(&r, &block),
+            filter_lanes::<Portable>(&r, &block),
+        );
         assert_eq!(vector, plain, "vector and portable lanes differ: {ray:?}");
         let hits = hit_lanes(&ray, &block);
         assert_eq!(
@@ -310,6 +285,149 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
         f64::from(rejected) > 0.95 * f64::from(misses),
         "rejected {rejected} of {misses} misses"
     );
+}
+
+/// The float after `x` (`x` finite).
+fn next_up(x: f32) -> f32 {
+    if x == 0.0 {
+        f32::from_bits(1)
+    } else if x > 0.0 {
+        f32::from_bits(x.to_bits() + 1)
+    } else {
+        f32::from_bits(x.to_bits() - 1)
+    }
+}
+
+/// The float before `x` (`x` finite).
+fn next_down(x: f32) -> f32 {
+    -next_up(-x)
+}
+
+/// The window check never rejects a hit: each pair's exact crossing `t` (the window wide open)
+/// with windows whose ends sit on `t`, one float beyond it, a little way off and on either side of
+/// zero; the vector and portable lanes agree throughout. (The check's error term cut to 1/100
+/// fails it; cut to 1/16 it still passes: the bound is a worst case, about ten times what these
+/// pairs show.)
+#[test]
+fn the_window_check_never_rejects_a_hit() {
+    let mut rng = SplitMix64::new(0x3d);
+    let mut windows_checked = 0u32;
+    for case in 0..60_000 {
+        let (ray, tri) = pair(&mut rng, case);
+        let open = Ray::segment(ray.org, ray.dir, f32::NEG_INFINITY, f32::INFINITY);
+        let Some(t) = definition(&open, &tri) else {
+            continue;
+        };
+        let mut block = Block4::default();
+        block.set(0, &tri);
+        for lane in 1..4 {
+            let rotated = [tri[lane % 3], tri[(lane + 1) % 3], tri[(lane + 2) % 3]];
+            block.set(lane, &rotated);
+        }
+        let scale = tri.iter().fold(0.0f32, |m, p| m.max(p.abs().max_element()));
+        let near = t.abs() * 1e-6 + 1e-30;
+        let windows = [
+            (t, t),
+            (t, f32::INFINITY),
+            (f32::NEG_INFINITY, t),
+            (next_up(t), f32::INFINITY),
+            (f32::NEG_INFINITY, next_down(t)),
+            (t - near, t + near),
+            (t + near, t + 2.0 * near),
+            (0.0, t),
+            (-0.0, f32::INFINITY),
+            (t.min(0.0), t.max(0.0)),
+        ];
+        for (tmin, tmax) in windows {
+            if !(tmin <= tmax) || !tmin.is_finite() && !tmax.is_finite() && tmin == tmax {
+                continue;
+            }
+            let windowed = Ray::segment(ray.org, ray.dir, tmin, tmax);
+            let Some(r) = PreparedRay::new(&windowed) else {
+                continue;
+            };
+            let r = r.for_scene(scale);
+            if !r.filter_ok {
+                continue;
+            }
+            windows_checked += 1;
+            let survivors = kernel_survivors(&r, &block);
+            assert_eq!(survivors, filter_lanes::<Portable>(&r, &block));
+            let hits = hit_lanes(&windowed, &block);
+            assert_eq!(
+                hits & !survivors,
+                0,
+                "window check rejected a hit: {windowed:?} {tri:?} (t = {t})"
+            );
+        }
+    }
+    assert!(windows_checked > 150_000, "{windows_checked}");
+}
+
+/// The window check does its job: a ray leaving a triangle (its origin a point of the triangle,
+/// rounded, `tmin` a small offset, as renderers trace bounces) does not send that triangle to the
+/// exact test, nor a triangle wholly behind the origin or beyond `tmax`, although each passes the
+/// edge test (the line meets it).
+#[test]
+fn the_window_check_rejects_crossings_outside_the_window() {
+    let mut rng = SplitMix64::new(0x77);
+    let (mut own, mut behind, mut beyond, mut lines) = (0u32, 0u32, 0u32, 0u32);
+    for _ in 0..5_000 {
+        let tri = [point(&mut rng), point(&mut rng), point(&mut rng)];
+        let n = (tri[1] - tri[0]).cross(tri[2] - tri[0]);
+        if n.length() < 0.1 {
+            continue;
+        }
+        let b = [
+            rng.next_f32() + 0.05,
+            rng.next_f32() + 0.05,
+            rng.next_f32() + 0.05,
+        ];
+        let sum = b[0] + b[1] + b[2];
+        let on = (b[0] * tri[0] + b[1] * tri[1] + b[2] * tri[2]) / sum;
+        let out = (point(&mut rng).normalize_or(Vec3::X) + 1.5 * n.normalize()).normalize();
+        let mut block = Block4::default();
+        block.set(0, &tri);
+        let lanes = |ray: &Ray| {
+            let r = PreparedRay::new(ray).unwrap().for_scene(4.0);
+            assert!(r.filter_ok);
+            kernel_survivors(&r, &block) & 1
+        };
+        let bounce = Ray::segment(on, out, 1e-4, f32::INFINITY);
+        let away = Ray::new(on + out, out);
+        let short = Ray::segment(on - out, out, 0.0, 0.5);
+        for ray in [&bounce, &away, &short] {
+            let open = Ray::segment(ray.org, ray.dir, f32::NEG_INFINITY, f32::INFINITY);
+            lines += u32::from(definition(&open, &tri).is_some());
+        }
+        own += 1 - lanes(&bounce);
+        behind += 1 - lanes(&away);
+        beyond += 1 - lanes(&short);
+    }
+    assert!(lines > 3 * 4_000, "{lines}");
+    let tried = lines / 3;
+    for (what, n) in [("own", own), ("behind", behind), ("beyond", beyond)] {
+        assert!(
+            f64::from(n) > 0.99 * f64::from(tried),
+            "{what}: {n} of {tried}"
+        );
+    }
+}
+
+/// [`filter::survivors`] for `r` on lanes `L`.
+fn filter_lanes<L: Lanes>(r: &PreparedRay, block: &Block4) -> u32 {
+    fn with<L: Lanes, const KZ: usize, const SWAP: bool>(r: &PreparedRay, block: &Block4) -> u32 {
+        let ray = filter::FilterRay::<L>::new::<KZ, SWAP>(r);
+        filter::survivors::<L, KZ, SWAP>(&ray, block)
+    }
+    match r.axes {
+        0 => with::<L, 0, false>(r, block),
+        1 => with::<L, 0, true>(r, block),
+        2 => with::<L, 1, false>(r, block),
+        3 => with::<L, 1, true>(r, block),
+        4 => with::<L, 2, false>(r, block),
+        _ => with::<L, 2, true>(r, block),
+    }
 }
 
 #[test]
