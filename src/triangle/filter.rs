@@ -141,46 +141,34 @@ pub(crate) struct FilterRay<L> {
     /// The window of `y = t·d_kz` ([`window_along_kz`]).
     y_lo: L,
     y_hi: L,
+    /// Whether the window check runs: not for a window `[≤ 0, ∞)`, where it could only drop
+    /// crossings behind the origin, which the leaves a ray reaches rarely hold.
+    check_window: bool,
 }
 
 /// The window `[lo, hi]` of `y = t·d_kz` (the crossing's distance along `kz`) that a hit can have:
-/// `lo` at most and `hi` at least the exact ends `τ·d_kz` of the ray's window moved out to the
-/// neighbouring floats (`tmin` down, `tmax` up; `d_kz < 0` swaps the ends). Each is `±∞`, or at
-/// least `2^-100` in magnitude: a normal number, as an operation on a subnormal costs a microcode
-/// assist (about 100 cycles on x86; measured here, a query 35–100 ns slower).
+/// `fl(τ·d_kz)` for each end `τ` of the ray's window (`d_kz < 0` swaps them), moved out by 2^-20
+/// of itself and by `2^-100·max(|d_kz|, 1)`. That is more than the product's rounding (`u` of
+/// it, or 2^-150 if it underflows) plus what keeps the end exclusive: a crossing beyond
+/// `τ·d_kz ± (2^-23|τ·d_kz| + 2^-149|d_kz|)` is one float beyond `τ` or more, so its rounded `t`
+/// is outside the window. Every value is zero, normal or infinite (an operation on a subnormal
+/// costs a microcode assist, about 100 cycles on x86: a first version with subnormal floors made
+/// every query 35–100 ns slower); `∞ − ∞` cannot occur (`tmin ≤ tmax`, neither NaN).
 #[inline(always)]
 fn window_along_kz(tmin: f32, tmax: f32, dz: f32) -> (f32, f32) {
-    // In f64 the products are exact (24 + 24 significant bits, far from f64's range limits); the
-    // margins of 2^-20 relative and 2^-100 absolute then dwarf the one rounding to f32.
-    let (a, b) = (
-        f64::from(next_below(tmin)) * f64::from(dz),
-        -f64::from(next_below(-tmax)) * f64::from(dz),
-    );
+    let (a, b) = (tmin * dz, tmax * dz);
     let (lo, hi) = if dz < 0.0 { (b, a) } else { (a, b) };
-    let out = |y: f64, sign: f64| (y + sign * (y.abs() * WINDOW_MARGIN + WINDOW_FLOOR)) as f32;
-    // `∞ − ∞` cannot occur: `lo` is never `+∞` nor `hi` `−∞` (`tmin ≤ tmax`, neither NaN).
-    (out(lo, -1.0), out(hi, 1.0))
-}
-
-/// The largest f32 below `x` (`−∞` stays `−∞`; `x` is not NaN).
-#[inline(always)]
-fn next_below(x: f32) -> f32 {
-    let b = x.to_bits();
-    if x == 0.0 {
-        -f32::from_bits(1)
-    } else if x == f32::NEG_INFINITY {
-        x
-    } else if x > 0.0 {
-        f32::from_bits(b - 1)
-    } else {
-        f32::from_bits(b + 1)
-    }
+    let floor = WINDOW_FLOOR * if dz.abs() > 1.0 { dz.abs() } else { 1.0 };
+    (
+        lo - (lo.abs() * WINDOW_MARGIN + floor),
+        hi + (hi.abs() * WINDOW_MARGIN + floor),
+    )
 }
 
 /// The window's relative margin along `kz` (2^-20).
-const WINDOW_MARGIN: f64 = 1.0 / 1_048_576.0;
-/// The window's absolute margin along `kz` (2^-100).
-const WINDOW_FLOOR: f64 = 7.888_609_052_210_118e-31;
+const WINDOW_MARGIN: f32 = 1.0 / 1_048_576.0;
+/// The window's absolute margin along `kz` for `|d_kz| ≤ 1` (2^-100).
+const WINDOW_FLOOR: f32 = 7.888_609e-31;
 /// 2^-126, the smallest normal f32: the absolute slack of a lane's `y`, far above what underflow
 /// can add to it (a few units of 2^-149).
 const Y_FLOOR: f32 = f32::MIN_POSITIVE;
@@ -227,6 +215,7 @@ impl<L: Lanes> FilterRay<L> {
             scene_low: scene_bound.neg(),
             y_lo: L::splat(y_lo),
             y_hi: L::splat(y_hi),
+            check_window: !(ray.tmin <= 0.0 && ray.tmax == f32::INFINITY),
         }
     }
 }
@@ -276,8 +265,8 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
     let z = az.abs().max(bz.abs()).max(cz.abs());
     let bound = bound(s, z);
     let live = !rejected(bound, bound.neg()) & 0b1111;
-    if live == 0 {
-        return 0;
+    if live == 0 || !ray.check_window {
+        return live;
     }
     live & !outside_window(ray, [u, v, w], [az, bz, cz], z, bound)
 }
