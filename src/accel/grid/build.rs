@@ -84,7 +84,7 @@ pub(super) fn lists(
     let largest_cell = counts.iter().take(n_cells).max().map_or(0, |&n| n as usize);
     let packed = params.layout == TriangleLayout::Packed;
     let filled = offsets(&mut counts, n_cells, if packed { 4 } else { 1 })
-        .and_then(|total| fill_lists(mesh, members, &kept, &mut counts, total, packed, budget));
+        .and_then(|total| fill_lists(mesh, &kept, &mut counts, total, packed, budget));
     let references = kept.cells.len();
     kept.release(budget);
     match filled {
@@ -109,21 +109,44 @@ pub(super) fn lists(
     }
 }
 
-/// Each member's cells in member order, and how many each member has.
+/// Each member's cells in member order, with the member's id beside each.
 struct Kept {
     cells: Vec<u32>,
-    per_triangle: Vec<u32>,
+    /// The id of the triangle of each kept cell (as long as `cells`): the fill then walks
+    /// references, not triangles with a varying number of cells each.
+    prims: Vec<u32>,
 }
 
 impl Kept {
     fn release(self, budget: &mut MemoryBudget) {
         budget.free(self.cells);
-        budget.free(self.per_triangle);
+        budget.free(self.prims);
+    }
+
+    /// The references both vectors have room for.
+    #[inline(always)]
+    fn room(&self) -> usize {
+        self.cells.capacity().min(self.prims.capacity())
+    }
+
+    /// Doubles the room of both vectors, charged to `budget`.
+    #[cold]
+    #[inline(never)]
+    fn grow(&mut self, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        let room = self.room();
+        let room = room
+            .checked_add(room.max(64))
+            .ok_or(BuildError::OutOfMemory {
+                what: "grid build scratch",
+                bytes: usize::MAX,
+            })?;
+        budget.reserve_to(&mut self.cells, room, "grid build scratch")?;
+        budget.reserve_to(&mut self.prims, room, "grid build scratch")
     }
 }
 
-/// Finds each live member's cells once, counts them in `counts` (one slot per cell) and keeps
-/// them for the fill.
+/// Finds each live member's cells once, keeps them with the member's id beside each, and counts
+/// them in `counts` (one slot per cell).
 #[inline(never)]
 fn keep_cells(
     mesh: &TriMesh,
@@ -135,19 +158,29 @@ fn keep_cells(
 ) -> Result<Kept, BuildError> {
     let tris = mesh.triangles();
     let n = members.len(mesh);
-    let mut per_triangle = budget.filled(n, 0u32, "grid build scratch")?;
-    // About 2.5 references per triangle on well-shaped scenes; the vector doubles past that.
+    // About 2.5 references per triangle on well-shaped scenes; the vectors double past that.
     let guess = n.saturating_mul(3).max(64);
-    let mut kept = match budget.vec::<u32>(guess, "grid build scratch") {
-        Ok(v) => v,
+    let mut kept = Kept {
+        cells: budget.vec::<u32>(guess, "grid build scratch")?,
+        prims: Vec::new(),
+    };
+    match budget.vec::<u32>(guess, "grid build scratch") {
+        Ok(v) => kept.prims = v,
         Err(e) => {
-            budget.free(per_triangle);
+            kept.release(budget);
             return Err(e);
         }
-    };
+    }
     let mut failed = None;
     let degenerate = mesh.degenerate_bits();
-    for (i, count) in per_triangle.iter_mut().enumerate() {
+    // The flat offsets of the cells `i, j, k` from a small footprint's corner, in the u32 of the
+    // kept cells (a cell's index is below `u32::MAX`, so the kept cells' sums do not wrap).
+    let corner = cells.corner.map(|c| c as u32);
+    // The references are written through raw pointers up to `len`, and the vectors' lengths set
+    // from `len` only where the vectors are used themselves (large footprints, the end): the
+    // length stays in a register instead of going through memory on every store.
+    let mut len = 0;
+    for i in 0..n {
         let prim = members.prim(i);
         // A listed member is live (it was listed); the mesh's degenerate triangles are skipped.
         let skip = matches!(members, Members::Mesh)
@@ -157,82 +190,91 @@ fn keep_cells(
         let Some(tri) = tris.get(prim).filter(|_| !skip) else {
             continue;
         };
-        let before = kept.len();
-        // Counts `cell` (a cell of the grid: each coordinate is clamped to `res − 1` by
-        // `Cells`, and `counts` has one slot per cell and one more). A count cannot wrap: it
-        // would need 2^32 references, which the total check below refuses.
-        let mut count_cell = |cell: usize| {
-            debug_assert!(cell < counts.len());
-            // SAFETY: above.
-            let n = unsafe { counts.get_unchecked_mut(cell) };
-            *n = n.wrapping_add(1);
-        };
         match cells.classify(tri, exact) {
-            Overlap::Small { base, mut mask } => {
-                // At most eight cells: make room first, so that the pushes never grow.
-                if kept.capacity() - kept.len() < 8 {
-                    if let Err(e) = grow(&mut kept, budget) {
+            Overlap::Small { base, mask } => {
+                // At most eight cells: make room first, so that the stores stay in the capacity.
+                if kept.room() - len < 8 {
+                    if let Err(e) = kept.grow(budget) {
                         failed = Some(e);
                         break;
                     }
                 }
-                while mask != 0 {
-                    let bit = mask.trailing_zeros() as usize;
-                    mask &= mask - 1;
-                    let cell = base + cells.corner[bit & 7];
-                    count_cell(cell);
-                    kept.push(cell as u32);
+                debug_assert!(kept.room() - len >= 8);
+                let (out, ids) = (kept.cells.as_mut_ptr(), kept.prims.as_mut_ptr());
+                // SAFETY: both vectors have room for 8 elements from `len` (above).
+                unsafe {
+                    ids.add(len)
+                        .cast::<[u32; 8]>()
+                        .write_unaligned([prim as u32; 8])
+                };
+                let base = base as u32;
+                // Every corner is stored and the length advanced by its bit, without a branch per
+                // cell (how many cells a triangle has is hard to predict): cell `b` lands at `len`
+                // plus the bits below `b`, and the ones whose bit is clear are overwritten or left
+                // beyond the length.
+                for (b, &c) in corner.iter().enumerate() {
+                    // SAFETY: `len` starts at least 8 below both capacities and grows by at most 1
+                    // for each of the 8 corners, after the store, so each store is in the capacity.
+                    unsafe { out.add(len).write(base.wrapping_add(c)) };
+                    len += (mask >> b) as usize & 1;
                 }
             }
             Overlap::Large(fp) => {
+                // SAFETY: the first `len` elements of both were written (above, or here before).
+                unsafe {
+                    kept.cells.set_len(len);
+                    kept.prims.set_len(len);
+                }
                 cells.for_each_large(tri, &fp, exact, &mut |cell| {
-                    count_cell(cell as usize);
-                    if kept.len() == kept.capacity() && failed.is_none() {
-                        if let Err(e) = grow(&mut kept, budget) {
+                    if kept.cells.len() == kept.room() && failed.is_none() {
+                        if let Err(e) = kept.grow(budget) {
                             failed = Some(e);
                         }
                     }
-                    if kept.len() < kept.capacity() {
-                        kept.push(cell);
+                    if kept.cells.len() < kept.room() {
+                        kept.cells.push(cell);
+                        kept.prims.push(prim as u32);
                     }
                 });
                 if failed.is_some() {
                     break;
                 }
+                len = kept.cells.len();
             }
         }
-        *count = (kept.len() - before) as u32;
+    }
+    debug_assert!(len <= kept.room());
+    // SAFETY: the first `len` elements of both were written.
+    unsafe {
+        kept.cells.set_len(len);
+        kept.prims.set_len(len);
     }
     if let Some(e) = failed {
-        budget.free(kept);
-        budget.free(per_triangle);
+        kept.release(budget);
         return Err(e);
     }
-    if kept.len() > u32::MAX as usize {
-        budget.free(kept);
-        budget.free(per_triangle);
+    if kept.cells.len() > u32::MAX as usize {
+        kept.release(budget);
         return Err(BuildError::CapacityExceeded {
             what: "grid references",
         });
     }
-    Ok(Kept {
-        cells: kept,
-        per_triangle,
-    })
+    count_cells(&kept.cells, counts);
+    Ok(kept)
 }
 
-/// Doubles the room of `kept`, charged to `budget`.
-#[cold]
+/// Counts each kept cell in its slot of `counts`, in a pass of its own: in the loop that finds the
+/// cells, the increments of a varying number of cells per triangle cost a branch each. A count
+/// cannot wrap: it would need 2^32 references, which [`keep_cells`] refuses.
 #[inline(never)]
-fn grow(kept: &mut Vec<u32>, budget: &mut MemoryBudget) -> Result<(), BuildError> {
-    let len = kept.len();
-    // `budget.push` grows by doubling when the vector is full; fill it to the brim first.
-    while kept.len() < kept.capacity() {
-        kept.push(0);
+fn count_cells(kept: &[u32], counts: &mut [u32]) {
+    for &cell in kept {
+        debug_assert!((cell as usize) < counts.len());
+        // SAFETY: every kept cell is a cell of the grid (each coordinate is clamped to `res − 1`
+        // by `Cells`), and `counts` has one slot per cell and one more.
+        let n = unsafe { counts.get_unchecked_mut(cell as usize) };
+        *n = n.wrapping_add(1);
     }
-    let r = budget.push(kept, 0, "grid build scratch");
-    kept.truncate(len);
-    r
 }
 
 /// Turns the per-cell counts into the ends of the cell lists, each list starting on a multiple of
@@ -259,28 +301,22 @@ fn offsets(counts: &mut [u32], cells: usize, align: u64) -> Result<usize, BuildE
     Ok(total as usize)
 }
 
-/// Walks the kept cells backwards (last member first), writing each reference's id into its
-/// slot of `ids` — the cell's end counted down, so lists come out sorted by id and `counts[c]`
-/// ends at the start of cell `c`'s list. Each cell is counted down exactly as many times as it was
-/// counted up, so every slot lies in `[start, end)` of its cell's list (no underflow, and below
-/// the total, the length of `ids`).
+/// Walks the kept references backwards (last member first), writing each one's id into its slot
+/// of `ids` — the cell's end counted down, so lists come out sorted by id and `counts[c]` ends at
+/// the start of cell `c`'s list. Each cell is counted down exactly as many times as it was counted
+/// up, so every slot lies in `[start, end)` of its cell's list (no underflow, and below the total,
+/// the length of `ids`).
 #[inline(never)]
-fn scatter_ids(members: Members<'_>, kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
-    let mut end = kept.cells.len();
-    for (i, &n) in kept.per_triangle.iter().enumerate().rev() {
-        let prim = members.prim(i);
-        let start = end - n as usize;
-        for &cell in kept.cells.get(start..end).unwrap_or(&[]).iter().rev() {
-            debug_assert!((cell as usize) < counts.len());
-            // SAFETY: every kept cell is a cell of the grid (keep_cells), and `counts` has a slot
-            // for each.
-            let c = unsafe { counts.get_unchecked_mut(cell as usize) };
-            *c -= 1;
-            debug_assert!((*c as usize) < ids.len());
-            // SAFETY: above, `*c` is a slot of the cell's list, below the total.
-            unsafe { *ids.get_unchecked_mut(*c as usize) = prim as u32 };
-        }
-        end = start;
+fn scatter_ids(kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
+    for (&cell, &prim) in kept.cells.iter().zip(&kept.prims).rev() {
+        debug_assert!((cell as usize) < counts.len());
+        // SAFETY: every kept cell is a cell of the grid (keep_cells), and `counts` has a slot for
+        // each.
+        let c = unsafe { counts.get_unchecked_mut(cell as usize) };
+        *c -= 1;
+        debug_assert!((*c as usize) < ids.len());
+        // SAFETY: above, `*c` is a slot of the cell's list, below the total.
+        unsafe { *ids.get_unchecked_mut(*c as usize) = prim };
     }
 }
 
@@ -293,7 +329,6 @@ fn scatter_ids(members: Members<'_>, kept: &Kept, counts: &mut [u32], ids: &mut 
 #[inline(never)]
 fn fill_lists(
     mesh: &TriMesh,
-    members: Members<'_>,
     kept: &Kept,
     counts: &mut [u32],
     total: usize,
@@ -302,7 +337,7 @@ fn fill_lists(
 ) -> Result<Lists, BuildError> {
     if !packed {
         let mut ids = budget.filled(total, Hit::INVALID_ID, "grid references")?;
-        scatter_ids(members, kept, counts, &mut ids);
+        scatter_ids(kept, counts, &mut ids);
         return Ok(Lists::Indexed {
             ids,
             packs: TrianglePacks::default(),
@@ -311,7 +346,7 @@ fn fill_lists(
     let blocks = total / 4;
     // Every lane starts unused, so the gap lanes at the end of each list need no pass of their own.
     let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
-    scatter_ids(members, kept, counts, ids.as_flattened_mut());
+    scatter_ids(kept, counts, ids.as_flattened_mut());
     match gather_blocks(mesh, &ids, budget) {
         Ok(tris) => Ok(Lists::Packed { ids, tris }),
         Err(e) => {
