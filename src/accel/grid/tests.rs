@@ -453,3 +453,61 @@ fn nested_grids_give_way_to_the_memory_limit_and_far_offsets() {
         agree(&far_mesh, &far_grid, &Ray::new(Vec3::new(2e5, 0.0, 0.0), d));
     }
 }
+
+/// The build lists each triangle in exactly the cells `Cells::for_each` gives it (the build
+/// stores a small footprint's cells its own way), each list sorted by id, in both layouts: on
+/// well-shaped scenes, long triangles (large footprints) and a mesh with degenerate triangles.
+#[test]
+fn built_lists_are_the_voxelization() {
+    let mut flat = procedural::random_soup(300, 9, 0.3);
+    // Degenerate triangles among the live ones: repeated and collinear vertices.
+    for k in 0..20 {
+        let x = k as f32 / 20.0;
+        let base = flat.vertices.len() as u32;
+        flat.vertices
+            .extend([[x, 0.1, 0.2], [x + 0.1, 0.2, 0.3], [x + 0.2, 0.3, 0.4]]);
+        flat.indices.push([base, base + 1, base + 2]);
+        flat.indices.push([base, base, base + 1]);
+    }
+    let scenes = [
+        procedural::random_slivers(800, 3),
+        procedural::hair(100, 4, 5),
+        procedural::teapot_in_stadium(100, 300),
+        flat,
+    ];
+    for data in &scenes {
+        for layout in [TriangleLayout::Packed, TriangleLayout::Indexed] {
+            for density in [0.125, 0.5, 2.0, 8.0] {
+                let params = GridParams {
+                    density,
+                    exact_overlap: true,
+                    layout,
+                };
+                let mut budget = MemoryBudget::new(0);
+                let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+                let grid = UniformGrid::build(&mesh, &params, &mut budget).unwrap();
+                let cells = Cells::new(&grid.shape);
+                let mut want = alloc::vec![Vec::new(); grid.shape.cells()];
+                for (prim, tri) in mesh.triangles().iter().enumerate() {
+                    if !mesh.is_degenerate(prim as u32) {
+                        cells.for_each(tri, true, &mut |c| want[c as usize].push(prim as u32));
+                    }
+                }
+                for (c, want) in want.iter().enumerate() {
+                    let (start, end) = (grid.offsets[c] as usize, grid.offsets[c + 1] as usize);
+                    let got: Vec<u32> = match &grid.lists {
+                        Lists::Packed { ids, .. } => ids[start..end]
+                            .as_flattened()
+                            .iter()
+                            .copied()
+                            .filter(|&id| id != Hit::INVALID_ID)
+                            .collect(),
+                        Lists::Indexed { ids, .. } => ids[start..end].to_vec(),
+                    };
+                    assert_eq!(&got, want, "cell {c}, density {density}, {layout:?}");
+                }
+                grid.release(&mut budget);
+            }
+        }
+    }
+}

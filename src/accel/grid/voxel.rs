@@ -41,6 +41,11 @@ pub(super) struct Cells {
     /// The margin plus a bound on the f32 footprint's rounding, in world units (see
     /// [`Cells::new`]).
     pad32: Vec3A,
+    /// The largest cell coordinate the footprint's f32 values are clamped to before truncation:
+    /// `res − 1` where every `res − 1` is at most 2^24 (exact in f32), else 2^30.
+    cap32: Vec3A,
+    /// Whether `cap32` is `res − 1` (so the truncated coordinates need no clamp of their own).
+    exact_cap: bool,
     min: [f64; 3],
     /// 1 / cell size.
     inv: [f64; 3],
@@ -105,6 +110,16 @@ impl Cells {
             shape.res[1] as f32,
             shape.res[2] as f32,
         );
+        // Each `res − 1` is exact in f32 up to 2^24: then the clamp to the last cell is done on
+        // the f32 value, before truncation (truncation is monotone and keeps integers).
+        let exact_cap = shape.res.iter().all(|r| (1..=(1 << 24) + 1).contains(r));
+        let cap = |a: usize| {
+            if exact_cap {
+                shape.res[a].saturating_sub(1) as f32
+            } else {
+                1_073_741_824.0
+            }
+        };
         let stride = [
             1,
             shape.res[0] as usize,
@@ -119,6 +134,8 @@ impl Cells {
             min32: shape.bounds.min.into(),
             inv32: (resf / (shape.bounds.max - shape.bounds.min)).into(),
             pad32: Vec3::from(pad).into(),
+            cap32: Vec3A::new(cap(0), cap(1), cap(2)),
+            exact_cap,
             min: f(shape.bounds.min),
             inv,
             half: [0, 1, 2].map(|a| (0.5 + margin[a] * inv[a]) * ROUNDING_SLACK),
@@ -128,9 +145,8 @@ impl Cells {
     /// The flat index of cell `c`.
     #[inline(always)]
     pub fn index(&self, c: [u32; 3]) -> usize {
-        c[0] as usize * self.stride[0]
-            + c[1] as usize * self.stride[1]
-            + c[2] as usize * self.stride[2]
+        // `stride[0]` is 1.
+        c[0] as usize + c[1] as usize * self.stride[1] + c[2] as usize * self.stride[2]
     }
 
     /// Coordinate `p` on `axis` in cell units.
@@ -150,19 +166,25 @@ impl Cells {
         let hi = p.max(q).max(r);
         let l = (lo - self.pad32 - self.min32) * self.inv32;
         let h = (hi + self.pad32 - self.min32) * self.inv32;
-        // The cell of a value is its floor clamped to the grid: clamp to [0, 2^30] first (NaN
+        // The cell of a value is its floor clamped to the grid: clamp to [0, cap] first (NaN
         // fails `f > 0` and becomes 0), truncate (floor, for a non-negative value), then clamp to
-        // the last cell.
+        // the last cell, which the cap already did when it is the last cell (`exact_cap`).
+        let clamp = |v: Vec3A| {
+            let v = Vec3A::select(v.cmpgt(Vec3A::ZERO), v, Vec3A::ZERO);
+            Vec3A::select(v.cmplt(self.cap32), v, self.cap32)
+        };
+        let (l, h) = (clamp(l), clamp(h));
         let cell = |f: f32, a: usize| {
-            let f = if f > 0.0 { f } else { 0.0 };
-            let f = if f < 1_073_741_824.0 {
-                f
-            } else {
-                1_073_741_824.0
-            };
             debug_assert!((0.0..=1_073_741_824.0).contains(&f));
-            // SAFETY: `f` is in [0, 2^30], so it is not NaN and its truncation fits an i32.
-            (unsafe { f.to_int_unchecked::<i32>() } as u32).min(self.res[a] - 1)
+            // SAFETY: `f` is in [0, cap], cap at most 2^30, so it is not NaN and its truncation
+            // fits an i32.
+            let c = unsafe { f.to_int_unchecked::<i32>() } as u32;
+            if self.exact_cap {
+                debug_assert!(c < self.res[a]);
+                c
+            } else {
+                c.min(self.res[a] - 1)
+            }
         };
         Footprint {
             lo: [cell(l.x, 0), cell(l.y, 1), cell(l.z, 2)],
@@ -201,10 +223,7 @@ impl Cells {
         // The footprint as bits i + 2j + 4k (the cell i, j, k up from its corner). A single cell
         // or a column needs no test: the (connected) triangle crosses a column from end to end
         // while lying within its enlarged cross-section, so it meets every cell of it.
-        let mut mask = 1u32;
-        mask |= (mask << 1) * n[0];
-        mask |= (mask << 2) * n[1];
-        mask |= (mask << 4) * n[2];
+        let mut mask = u32::from(FOOTPRINT_MASK[(n[0] + 2 * n[1] + 4 * n[2]) as usize & 7]);
         if exact && n[0] + n[1] + n[2] >= 2 {
             mask &= self.small(tri, &fp, n.map(|n| n > 0));
         }
@@ -369,6 +388,28 @@ impl Cells {
         }
     }
 }
+
+/// The cells of a footprint of `1 + n_a` cells on each axis `a` (`n_a` 0 or 1) as bits `i + 2j +
+/// 4k`, indexed by `n_0 + 2n_1 + 4n_2`.
+const FOOTPRINT_MASK: [u8; 8] = {
+    let mut t = [0u8; 8];
+    let mut i = 0;
+    while i < 8 {
+        let mut m = 1u8;
+        if i & 1 != 0 {
+            m |= m << 1;
+        }
+        if i & 2 != 0 {
+            m |= m << 2;
+        }
+        if i & 4 != 0 {
+            m |= m << 4;
+        }
+        t[i] = m;
+        i += 1;
+    }
+    t
+};
 
 /// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
 const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
