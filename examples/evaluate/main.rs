@@ -679,11 +679,13 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         SAMPLE_SIDES.iter().rposition(|&s| s <= side).unwrap_or(0)
     };
     // What the selector sees on scene `i` for budget `r` (0 = unknown).
-    let selector = |i: usize, r: f64| {
+    // What the selector sees on scene `i` for budget `r` (0 = unknown) with the estimates `loo`
+    // (per sample side, per scene: the library's variant, or another for the variants table).
+    let selector_with = |loo: &[Vec<CostEstimate>], i: usize, r: f64| {
         let k = side_index(r);
         let m = &results[i];
         Selector {
-            estimate: loo_by_side[k][i],
+            estimate: loo[k][i],
             sample_s: m.samples[k].1 * 1e-9,
             confirmed: kd_tree_confirmed(
                 rayq::Calibration::builtin(),
@@ -693,6 +695,29 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             check_s: m.kd_samples[k].1 * 1e-9,
             abandoned_s: m.abandoned_s,
         }
+    };
+    let selector = |i: usize, r: f64| selector_with(&loo_by_side, i, r);
+    // Regret (AUTO / oracle) over the scenes and known budgets with the estimates `loo`: the
+    // geometric mean, the worst and where.
+    let regret_with = |loo: &[Vec<CostEstimate>]| {
+        let (mut q, mut worst) = (Vec::new(), (1.0f64, String::new()));
+        for (i, m) in results.iter().enumerate() {
+            for r in budgets() {
+                let t = totals(
+                    &m.obs,
+                    &selector_with(loo, i, r),
+                    &selector_with(loo, i, 0.0),
+                    r,
+                    TRIAL_SHARE,
+                );
+                let x = t.auto_known / t.oracle;
+                q.push(x);
+                if x > worst.0 {
+                    worst = (x, format!("{} at {r:.0e}", m.name));
+                }
+            }
+        }
+        (geomean(&q), worst)
     };
     let at_share = |i: usize, r: f64, share: f64| {
         totals(
@@ -1097,7 +1122,9 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     // Model terms vs cross-validated error.
     let _ = writeln!(
         md,
-        "### Model terms\n\n| variant | terms | leave-one-out W* error |\n|---|---:|---:|"
+        "### Model terms\n\nEach variant's leave-one-out estimates, and AUTO's regret over the scenes × known \
+         budgets above with them (the library's trial share and check):\n\n| variant | terms | \
+         leave-one-out W* error | regret geometric mean | worst |\n|---|---:|---:|---:|---|"
     );
     let mut term_pts = Vec::new();
     for (label, t) in VARIANTS {
@@ -1114,7 +1141,15 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let mut e = cross_validated_errors(&obs, &t, 0, GridCost::Counted);
         let me = median(&mut e);
         term_pts.push((n_terms as f64, 100.0 * me));
-        let _ = writeln!(md, "| {label} | {n_terms} | {:.1} % |", 100.0 * me);
+        let loo_t: Vec<Vec<CostEstimate>> = (0..SAMPLE_SIDES.len())
+            .map(|k| cross_validated_estimates(&with_side(results, k), &t, 0, GridCost::Counted))
+            .collect();
+        let (mean, (worst, at)) = regret_with(&loo_t);
+        let _ = writeln!(
+            md,
+            "| {label} | {n_terms} | {:.1} % | {mean:.3} | {worst:.3} ({at}) |",
+            100.0 * me
+        );
     }
     write_chart(
         args,
