@@ -171,8 +171,9 @@ fn window_along_kz(tmin: f32, tmax: f32, dz: f32) -> (f32, f32) {
 const WINDOW_MARGIN: f32 = 1.0 / 1_048_576.0;
 /// The window's absolute margin along `kz` for `|d_kz| ≤ 1` (2^-100).
 const WINDOW_FLOOR: f32 = 7.888_609e-31;
-/// 2^-126, the smallest normal f32: the absolute slack of a lane's `y`, far above what underflow
-/// can add to it (a few units of 2^-149).
+/// 2^-126, the smallest normal f32: the absolute slack of a lane's numerator `N` (before the
+/// division by `D`) and of its `y`, far above what underflow can take from either (a few units of
+/// 2^-149 each).
 const Y_FLOOR: f32 = f32::MIN_POSITIVE;
 
 /// Relative slack of the per-ray `S` and `Z`. Not needed by the argument (see `FilterRay::new`:
@@ -297,7 +298,10 @@ fn outside_window<L: Lanes>(ray: &FilterRay<L>, e: [L; 3], z: [L; 3], zmax: L, b
                 .mul(err_det)
                 .add(L::splat(3.0 * U32).mul(det.abs())),
         )
-        .add(L::splat(2.1).mul(err_num))
+        // The floor inside the quotient covers what underflow takes from the numerator's three
+        // products (2^-150 each) and from `err_num` itself, which `|D̂|` down to 2^-125 can
+        // magnify (a review found hits dropped without it: triangles of 1e-13 near the origin).
+        .add(L::splat(2.1).mul(err_num.add(L::splat(Y_FLOOR))))
         .mul(inv.abs())
         .add(L::splat(Y_FLOOR));
     // Where `|det|` is at most twice its error the crossing is not bounded: such lanes stay.

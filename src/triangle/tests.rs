@@ -305,15 +305,35 @@ fn next_down(x: f32) -> f32 {
 
 /// The window check never rejects a hit: each pair's exact crossing `t` (the window wide open)
 /// with windows whose ends sit on `t`, one float beyond it, a little way off and on either side of
-/// zero; the vector and portable lanes agree throughout. (The check's error term cut to 1/100
-/// fails it; cut to 1/16 it still passes: the bound is a worst case, about ten times what these
-/// pairs show.)
+/// zero; the vector and portable lanes agree throughout; half of the pairs at other scales. (The
+/// check's error term cut to 1/100 fails it, and so does the first version's numerator without a
+/// floor; cut to 1/16 it still passes: the bound is a worst case, about ten times what these pairs
+/// show.)
 #[test]
 fn the_window_check_never_rejects_a_hit() {
     let mut rng = SplitMix64::new(0x3d);
     let mut windows_checked = 0u32;
     for case in 0..60_000 {
         let (ray, tri) = pair(&mut rng, case);
+        // Half of the pairs moved to another scale by powers of two (exact unless they leave the
+        // normal range), their direction to another length: the scales between the pairs' own
+        // (1 and 1e-20) are where a numerator that underflows matters.
+        let (ray, tri) = if case % 2 == 0 {
+            (ray, tri)
+        } else {
+            let pow2 = |k: i32| 2f32.powi(k);
+            let (f, g) = (
+                pow2(rng.below(200) as i32 - 100),
+                pow2(rng.below(200) as i32 - 100),
+            );
+            (
+                Ray::segment(ray.org * f, ray.dir * g, ray.tmin, ray.tmax),
+                tri.map(|p| p * f),
+            )
+        };
+        if !(ray.org.is_finite() && ray.dir.is_finite() && tri.iter().all(|p| p.is_finite())) {
+            continue;
+        }
         let open = Ray::segment(ray.org, ray.dir, f32::NEG_INFINITY, f32::INFINITY);
         let Some(t) = definition(&open, &tri) else {
             continue;
@@ -362,6 +382,39 @@ fn the_window_check_never_rejects_a_hit() {
         }
     }
     assert!(windows_checked > 150_000, "{windows_checked}");
+}
+
+/// A tiny triangle near the origin: the window check's numerator underflows, and a small
+/// determinant magnifies what it loses (a review's counterexample to the first version).
+#[test]
+fn a_tiny_triangle_near_the_origin_keeps_its_hit() {
+    for (s, z) in [
+        (3e-14f32, 3e-14f32),
+        (1e-13, 1e-15),
+        (3e-11, 1e-20),
+        (2e-12, 1e-18),
+    ] {
+        let tri = [
+            Vec3::new(-s, -0.7 * s, z),
+            Vec3::new(1.3 * s, -s, 1.1 * z),
+            Vec3::new(0.1 * s, s, 0.9 * z),
+        ];
+        let open = Ray::segment(Vec3::ZERO, Vec3::Z, f32::NEG_INFINITY, f32::INFINITY);
+        let t = definition(&open, &tri).expect("the line meets the triangle");
+        for (tmin, tmax) in [(t, f32::INFINITY), (t, t), (0.5 * t, 2.0 * t)] {
+            let ray = Ray::segment(Vec3::ZERO, Vec3::Z, tmin, tmax);
+            assert!(definition(&ray, &tri).is_some());
+            let mut block = Block4::default();
+            block.set(0, &tri);
+            let r = PreparedRay::new(&ray).unwrap().for_scene(2.0 * s.max(z));
+            assert!(r.filter_ok);
+            assert_eq!(
+                kernel_survivors(&r, &block) & 1,
+                1,
+                "s = {s:e}, z = {z:e}, window [{tmin:e}, {tmax:e}]"
+            );
+        }
+    }
 }
 
 /// The window check does its job: a ray leaving a triangle (its origin a point of the triangle,

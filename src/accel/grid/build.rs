@@ -129,10 +129,19 @@ impl Kept {
         self.cells.capacity().min(self.prims.capacity())
     }
 
-    /// Doubles the room of both vectors, charged to `budget`.
+    /// Doubles the room of both vectors, charged to `budget`, keeping their first `written`
+    /// elements (written through raw pointers beyond the vectors' lengths, at most `room()`).
     #[cold]
     #[inline(never)]
-    fn grow(&mut self, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+    fn grow(&mut self, written: usize, budget: &mut MemoryBudget) -> Result<(), BuildError> {
+        debug_assert!(written <= self.room());
+        // SAFETY: the callers wrote the first `written` elements of both vectors, within both
+        // capacities. The lengths must cover them before a reallocation: a vector moves its
+        // elements, and promises nothing of its spare capacity.
+        unsafe {
+            self.cells.set_len(written);
+            self.prims.set_len(written);
+        }
         let room = self.room();
         let room = room
             .checked_add(room.max(64))
@@ -194,7 +203,7 @@ fn keep_cells(
             Overlap::Small { base, mask } => {
                 // At most eight cells: make room first, so that the stores stay in the capacity.
                 if kept.room() - len < 8 {
-                    if let Err(e) = kept.grow(budget) {
+                    if let Err(e) = kept.grow(len, budget) {
                         failed = Some(e);
                         break;
                     }
@@ -227,7 +236,7 @@ fn keep_cells(
                 }
                 cells.for_each_large(tri, &fp, exact, &mut |cell| {
                     if kept.cells.len() == kept.room() && failed.is_none() {
-                        if let Err(e) = kept.grow(budget) {
+                        if let Err(e) = kept.grow(kept.cells.len(), budget) {
                             failed = Some(e);
                         }
                     }

@@ -511,3 +511,54 @@ fn built_lists_are_the_voxelization() {
         }
     }
 }
+
+/// Memory limits through the build's growth paths (scenes of 9–30 references a triangle, past the
+/// scratch's first guess of 3, so both the small and the large footprints' growth run): each build
+/// either fits, with the unlimited build's lists, or fails with every byte given back.
+#[test]
+fn a_build_under_any_memory_limit_is_whole_or_nothing() {
+    let mut data = procedural::random_soup(400, 11, 0.4);
+    data.append(&procedural::hair(30, 4, 5));
+    let mut unlimited = MemoryBudget::new(0);
+    let mesh = TriMesh::from_source(&data.as_source(), &mut unlimited).unwrap();
+    let base = unlimited.used();
+    for layout in [TriangleLayout::Packed, TriangleLayout::Indexed] {
+        for density in [2.0f32, 32.0] {
+            let params = GridParams {
+                density,
+                exact_overlap: true,
+                layout,
+            };
+            let full = UniformGrid::build(&mesh, &params, &mut MemoryBudget::new(0)).unwrap();
+            let (mut fitted, mut refused) = (0, 0);
+            let mut limit = base + 1;
+            while limit < base + 4 * full.memory_bytes() + (1 << 20) {
+                let mut budget = MemoryBudget::new(limit);
+                budget.charge(base, "mesh").unwrap();
+                match UniformGrid::build(&mesh, &params, &mut budget) {
+                    Ok(g) => {
+                        fitted += 1;
+                        assert_eq!(g.offsets, full.offsets);
+                        match (&g.lists, &full.lists) {
+                            (Lists::Packed { ids: a, .. }, Lists::Packed { ids: b, .. }) => {
+                                assert_eq!(a, b)
+                            }
+                            (Lists::Indexed { ids: a, .. }, Lists::Indexed { ids: b, .. }) => {
+                                assert_eq!(a, b)
+                            }
+                            _ => panic!("layouts differ"),
+                        }
+                        g.release(&mut budget);
+                        assert_eq!(budget.used(), base);
+                    }
+                    Err(_) => {
+                        refused += 1;
+                        assert_eq!(budget.used(), base, "limit {limit}");
+                    }
+                }
+                limit = limit * 5 / 4 + 64;
+            }
+            assert!(fitted > 0 && refused > 0, "{fitted} {refused}");
+        }
+    }
+}
