@@ -25,9 +25,9 @@
 //!
 //! A lane left after the edge test goes on only if its crossing may be in the window: from the
 //! same edge functions, `y = t·d_kz = (U·a_z + V·b_z + W·c_z)/(U + V + W)` with error bounds for the
-//! numerator and the determinant from `E`, compared with the window's ends along `kz` moved out to
-//! the neighbouring floats (so a crossing certainly beyond one rounds to a `t` beyond the window,
-//! which the exact test misses). It spares the f64 stage a bounce ray's own triangle (about half
+//! numerator and the determinant from `E`, compared with the window's ends along `kz` moved out by
+//! more than one float of `t` (so a crossing certainly beyond one rounds to a `t` beyond the
+//! window, which the exact test misses). It spares the f64 stage a bounce ray's own triangle (about half
 //! of its calls in a path tracer's rays), triangles behind the origin and beyond `tmax`. Derived
 //! in docs/design.md ("The window check"); every constant is zero, normal or infinite, as
 //! subnormal operands cost microcode assists.
@@ -196,9 +196,8 @@ impl<L: Lanes> FilterRay<L> {
     /// rounding to a subnormal is monotone too); and `bound` is monotone in `S` and `Z`. The slack
     /// on top is insurance, not part of the argument.
     ///
-    /// The window's ends are moved out to the neighbouring floats (`tmin` down, `tmax` up): a
-    /// crossing certainly beyond one of them rounds to a `t` beyond the window's own end, which
-    /// the exact test misses.
+    /// The window's ends along `kz` come from [`window_along_kz`]; the check is off for a window
+    /// `[≤ 0, ∞)`.
     #[inline(always)]
     pub(crate) fn new<const KZ: usize, const SWAP: bool>(ray: &PreparedRay) -> Self {
         let (org, sx, sy, reach) = (ray.org, ray.sx32, ray.sy32, ray.reach);
