@@ -171,10 +171,16 @@ fn window_along_kz(tmin: f32, tmax: f32, dz: f32) -> (f32, f32) {
 const WINDOW_MARGIN: f32 = 1.0 / 1_048_576.0;
 /// The window's absolute margin along `kz` for `|d_kz| ≤ 1` (2^-100).
 const WINDOW_FLOOR: f32 = 7.888_609e-31;
-/// 2^-126, the smallest normal f32: the absolute slack of a lane's numerator `N` (before the
-/// division by `D`) and of its `y`, far above what underflow can take from either (a few units of
-/// 2^-149 each).
+/// 2^-126, the smallest normal f32: the absolute slack of a lane's `y`, far above what underflow
+/// can take from it (a few units of 2^-149).
 const Y_FLOOR: f32 = f32::MIN_POSITIVE;
+/// 2^-80: the absolute slack of a lane's numerator `N` (before the division by `D`), far above
+/// what underflow can take from it and from its bound (a few units of 2^-149), and far above
+/// 2^-126 so that its quotient by `D` stays normal for `|D| < 2^46`. With 2^-126 here the
+/// quotient was subnormal whenever `N` and its bound were zero and `|D| > 2.1`, which a bounce ray
+/// from an axis-aligned floor meets on every coplanar triangle (the translated `z` all exactly
+/// zero): a microcode assist of ~100 cycles each time (docs/performance.md, "Stop 29").
+const N_FLOOR: f32 = 8.271_806e-25;
 
 /// Relative slack of the per-ray `S` and `Z`. Not needed by the argument (see `FilterRay::new`:
 /// rounding is monotone, so the per-ray values computed with the filter's own operations already
@@ -290,8 +296,20 @@ fn outside_window<L: Lanes>(ray: &FilterRay<L>, e: [L; 3], z: [L; 3], zmax: L, b
     );
     let inv = L::splat(1.0).div(det);
     let y = num.mul(inv);
-    let err_y = y
-        .abs()
+    let err_y = crossing_error(y, det, err_det, err_num, inv);
+    // Where `|det|` is at most twice its error the crossing is not bounded: such lanes stay.
+    let bounded = det.abs().gt(L::splat(2.0).mul(err_det));
+    let before = y.add(err_y).lt(ray.y_lo);
+    let after = y.sub(err_y).gt(ray.y_hi);
+    L::bits(L::and(bounded, before)) | L::bits(L::and(bounded, after))
+}
+
+/// The bound on the error of a lane's crossing `ŷ = N̂·fl(1/D̂)` (`inv`), given the bounds on
+/// the error of `D̂` (`det`) and `N̂` (docs/design.md, "The window check"). Normal (at least 2^-125)
+/// for `|D̂| < 2^46` whatever `ŷ` and the bounds are, so that the check costs no microcode assist.
+#[inline(always)]
+fn crossing_error<L: Lanes>(y: L, det: L, err_det: L, err_num: L, inv: L) -> L {
+    y.abs()
         .mul(
             L::splat(2.1)
                 .mul(err_det)
@@ -300,14 +318,9 @@ fn outside_window<L: Lanes>(ray: &FilterRay<L>, e: [L; 3], z: [L; 3], zmax: L, b
         // The floor inside the quotient covers what underflow takes from the numerator's three
         // products (2^-150 each) and from `err_num` itself, which `|D̂|` down to 2^-125 can
         // magnify (a review found hits dropped without it: triangles of 1e-13 near the origin).
-        .add(L::splat(2.1).mul(err_num.add(L::splat(Y_FLOOR))))
+        .add(L::splat(2.1).mul(err_num.add(L::splat(N_FLOOR))))
         .mul(inv.abs())
-        .add(L::splat(Y_FLOOR));
-    // Where `|det|` is at most twice its error the crossing is not bounded: such lanes stay.
-    let bounded = det.abs().gt(L::splat(2.0).mul(err_det));
-    let before = y.add(err_y).lt(ray.y_lo);
-    let after = y.sub(err_y).gt(ray.y_hi);
-    L::bits(L::and(bounded, before)) | L::bits(L::and(bounded, after))
+        .add(L::splat(Y_FLOOR))
 }
 
 /// The bound `E` on the error of the edge functions of triangles whose sheared `|x|, |y|` are at
@@ -332,4 +345,33 @@ fn sheared<L: Lanes>(p: &[[f32; 4]], k: [usize; 3], o: [L; 3], s: [L; 2]) -> (L,
     let x = L::load(&p[k[0]]).sub(o[0]).sub(s[0].mul(z));
     let y = L::load(&p[k[1]]).sub(o[1]).sub(s[1].mul(z));
     (x, y, z)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::triangle::lanes::Portable;
+
+    /// A bounce ray from an axis-aligned floor meets the floor's triangles with `N̂` and its bound
+    /// zero (their translated `z` all exactly zero): the crossing's error must still be computed
+    /// without a subnormal value, at every determinant up to 2^45 (with a floor of 2^-126 inside
+    /// the quotient, as at stop 28, it is subnormal from `|D̂| = 4` on).
+    #[test]
+    fn the_crossing_error_of_a_coplanar_triangle_stays_normal() {
+        let zero = Portable::splat(0.0);
+        for k in -20..46 {
+            let d = pow2(k);
+            for det in [d, -d, 1.5 * d] {
+                let (lanes, inv) = (Portable::splat(det), Portable::splat(1.0 / det));
+                let err = crossing_error(zero, lanes, zero, zero, inv);
+                let bits = Portable::bits(err.lt(Portable::splat(2.0 * f32::MIN_POSITIVE)));
+                assert_eq!(bits, 0, "determinant {det:e}");
+            }
+        }
+    }
+
+    /// 2^k for |k| < 127.
+    fn pow2(k: i32) -> f32 {
+        f32::from_bits(((127 + k) as u32) << 23)
+    }
 }
