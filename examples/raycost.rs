@@ -9,6 +9,7 @@
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
 //!     target/release/examples/raycost kdbuild 5 bunny             # kd-tree build and its shape
 //!     GRID_DENSITY=1 target/release/examples/raycost time 5 bunny # another grid density (λ)
+//!     RAYS=bounce target/release/examples/raycost time 5 bunny    # only the bounces (or RAYS=camera)
 //!     KD_CI=1 target/release/examples/raycost time 5 bunny        # other kd-tree costs (KD_BONUS, KD_EXACT, KD_DEPTH, KD_INDEXED)
 //!     target/release/examples/raycost probe 3 bunny tetra-10k     # a kd-tree of every 16th triangle as a predictor
 //!     target/release/examples/raycost floor 5                     # a query's fixed cost (one-triangle scene;
@@ -431,7 +432,11 @@ fn main() {
         let mut rays = camera_rays(&mesh.bounds(), 128, &mut rng);
         let hits: Vec<_> = rays.iter().map(|r| tree.intersect(&mesh, r)).collect();
         let bounces = bounce_rays(&mesh, &rays, &hits, &mut rng);
-        rays.extend(bounces);
+        match std::env::var("RAYS").as_deref() {
+            Ok("camera") => {}
+            Ok("bounce") => rays = bounces,
+            _ => rays.extend(bounces),
+        }
         let n = rays.len() as f64;
         if mode == "probe" {
             print!("{name:>16} ");
