@@ -346,32 +346,3 @@ fn sheared<L: Lanes>(p: &[[f32; 4]], k: [usize; 3], o: [L; 3], s: [L; 2]) -> (L,
     let y = L::load(&p[k[1]]).sub(o[1]).sub(s[1].mul(z));
     (x, y, z)
 }
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::triangle::lanes::Portable;
-
-    /// A bounce ray from an axis-aligned floor meets the floor's triangles with `N̂` and its bound
-    /// zero (their translated `z` all exactly zero): the crossing's error must still be computed
-    /// without a subnormal value, at every determinant up to 2^45 (with a floor of 2^-126 inside
-    /// the quotient, as at stop 28, it is subnormal from `|D̂| = 4` on).
-    #[test]
-    fn the_crossing_error_of_a_coplanar_triangle_stays_normal() {
-        let zero = Portable::splat(0.0);
-        for k in -20..46 {
-            let d = pow2(k);
-            for det in [d, -d, 1.5 * d] {
-                let (lanes, inv) = (Portable::splat(det), Portable::splat(1.0 / det));
-                let err = crossing_error(zero, lanes, zero, zero, inv);
-                let bits = Portable::bits(err.lt(Portable::splat(2.0 * f32::MIN_POSITIVE)));
-                assert_eq!(bits, 0, "determinant {det:e}");
-            }
-        }
-    }
-
-    /// 2^k for |k| < 127.
-    fn pow2(k: i32) -> f32 {
-        f32::from_bits(((127 + k) as u32) << 23)
-    }
-}

@@ -5,7 +5,7 @@ use alloc::vec::Vec;
 use glam::Vec3;
 
 use super::exact::ExactTriangle;
-use super::lanes::{Lanes, Portable, F4};
+use super::lanes::{Lanes, Portable, Watched, F4, TINY_RESULTS};
 use super::testgen::{log_uniform, pair, point, signed};
 use super::{filter, Block4, PreparedRay};
 use crate::ray::{Aabb, Ray};
@@ -595,94 +595,6 @@ fn the_expanded_bound_is_at_least_the_derived_one() {
             expanded >= derived && expanded.is_finite(),
             "s {s:e} z {z:e}: expanded {expanded:e} < derived {derived:e}"
         );
-    }
-}
-
-/// Lanes that count the arithmetic results too small to be normal (an exact result between zero
-/// and 2^-126, which x86 finishes with a microcode assist of ~100 cycles unless flush-to-zero is
-/// set): the plain lanes' operations, each result checked in f64 (exact for `+`, `−`, `×` of f32).
-#[derive(Clone, Copy, Debug)]
-struct Watched([f32; 4]);
-
-static TINY_RESULTS: core::sync::atomic::AtomicUsize = core::sync::atomic::AtomicUsize::new(0);
-
-impl Watched {
-    fn op(self, o: Self, f32op: impl Fn(f32, f32) -> f32, f64op: impl Fn(f64, f64) -> f64) -> Self {
-        Watched(core::array::from_fn(|k| {
-            let exact = f64op(f64::from(self.0[k]), f64::from(o.0[k]));
-            if exact != 0.0 && exact.abs() < f64::from(f32::MIN_POSITIVE) {
-                TINY_RESULTS.fetch_add(1, core::sync::atomic::Ordering::Relaxed);
-            }
-            f32op(self.0[k], o.0[k])
-        }))
-    }
-
-    fn cmp(self, o: Self, f: impl Fn(f32, f32) -> bool) -> u32 {
-        (0..4).fold(0, |m, k| m | (u32::from(f(self.0[k], o.0[k])) << k))
-    }
-}
-
-impl Lanes for Watched {
-    type Mask = u32;
-    fn splat(x: f32) -> Self {
-        Watched([x; 4])
-    }
-    fn load(v: &[f32; 4]) -> Self {
-        Watched(*v)
-    }
-    fn add(self, o: Self) -> Self {
-        self.op(o, |a, b| a + b, |a, b| a + b)
-    }
-    fn sub(self, o: Self) -> Self {
-        self.op(o, |a, b| a - b, |a, b| a - b)
-    }
-    fn mul(self, o: Self) -> Self {
-        self.op(o, |a, b| a * b, |a, b| a * b)
-    }
-    fn div(self, o: Self) -> Self {
-        self.op(o, |a, b| a / b, |a, b| a / b)
-    }
-    fn max(self, o: Self) -> Self {
-        Watched(core::array::from_fn(|k| {
-            if self.0[k] > o.0[k] {
-                self.0[k]
-            } else {
-                o.0[k]
-            }
-        }))
-    }
-    fn min(self, o: Self) -> Self {
-        Watched(core::array::from_fn(|k| {
-            if self.0[k] < o.0[k] {
-                self.0[k]
-            } else {
-                o.0[k]
-            }
-        }))
-    }
-    fn abs(self) -> Self {
-        Watched(self.0.map(f32::abs))
-    }
-    fn neg(self) -> Self {
-        Watched(self.0.map(|x| -x))
-    }
-    fn nle(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| !(a <= b))
-    }
-    fn nge(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| !(a >= b))
-    }
-    fn gt(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| a > b)
-    }
-    fn lt(self, o: Self) -> u32 {
-        self.cmp(o, |a, b| a < b)
-    }
-    fn and(a: u32, b: u32) -> u32 {
-        a & b
-    }
-    fn bits(m: u32) -> u32 {
-        m
     }
 }
 
