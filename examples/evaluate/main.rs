@@ -425,8 +425,9 @@ fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64, share: 
     totals_capped(o, known, unknown, r, share, None)
 }
 
-/// [`totals`], with a trial build (below the estimated W*) abandoned once it has taken `cap` times
-/// the grid's estimated trace time of the budget, when `cap` is given.
+/// [`totals`], with a known budget's trial build (below the estimated W*) abandoned once it has
+/// taken `cap` times the grid's estimated trace time of the budget, when `cap` is given (or
+/// earlier, where the work limit already stops it). The unknown budget's switch is not capped.
 fn totals_capped(
     o: &Observation,
     known: &Selector,
@@ -440,9 +441,9 @@ fn totals_capped(
     let grid = g + r * tg;
     let kd = b + r * tk;
     let trial = r < known.estimate.break_even_rays();
-    let capped = match cap {
-        Some(c) if trial && b > c * r * known.estimate.grid_ray_seconds => Selector {
-            abandoned_s: Some(c * r * known.estimate.grid_ray_seconds),
+    let capped = match cap.map(|c| c * r * known.estimate.grid_ray_seconds) {
+        Some(limit) if trial && b > limit => Selector {
+            abandoned_s: Some(known.abandoned_s.map_or(limit, |a| a.min(limit))),
             ..*known
         },
         _ => *known,
@@ -955,8 +956,9 @@ fn analyse(results: &[Measured], args: &Args) -> String {
          build keeps the faster structure). Regret over the scenes × budgets above for each share \
          (the library uses {:.4}), with the budget where the worst is; *capped*: the same with a \
          trial's build abandoned once it has taken the share of the grid's estimated trace time \
-         (simulated: the library caps a build's work, not its time, and not by the budget), the \
-         rest of the rays on the grid, rebuilt:\n",
+         (or where the work limit stops it first; simulated: the library caps a build's work, not \
+         its time, and not by the budget), the rest of the rays on the grid, rebuilt; the unknown \
+         budget's column is not capped:\n",
         TRIAL_SHARE
     );
     let _ = writeln!(
