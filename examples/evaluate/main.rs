@@ -700,11 +700,11 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
         SAMPLE_SIDES.iter().rposition(|&s| s <= side).unwrap_or(0)
     };
-    // What the selector sees on scene `i` for budget `r` (0 = unknown).
-    // What the selector sees on scene `i` for budget `r` (0 = unknown) with the estimates `loo`
-    // (per sample side, per scene: the library's variant, or another for the variants table).
-    let selector_with = |loo: &[Vec<CostEstimate>], i: usize, r: f64| {
-        let k = side_index(r);
+    // What the selector sees on scene `i` with the samples of side `SAMPLE_SIDES[k]` and the
+    // estimates `loo` (per sample side, per scene: the library's variant, or another for the
+    // variants table); `selector_with` takes the side the library uses for budget `r` (0 =
+    // unknown).
+    let selector_at = |loo: &[Vec<CostEstimate>], k: usize, i: usize| {
         let m = &results[i];
         Selector {
             estimate: loo[k][i],
@@ -718,6 +718,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             abandoned_s: m.abandoned_s,
         }
     };
+    let selector_with =
+        |loo: &[Vec<CostEstimate>], i: usize, r: f64| selector_at(loo, side_index(r), i);
     let selector = |i: usize, r: f64| selector_with(&loo_by_side, i, r);
     // Regret (AUTO / oracle) over the scenes and known budgets with the estimates `loo`: the
     // geometric mean, the worst and where.
@@ -773,6 +775,8 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     let mut decisions = 0usize;
     // The cases above the issue's worst-case goal, for the line under the summary.
     let mut above_goal = Vec::new();
+    // Why: the estimates against the measurements on each of them.
+    let mut why_above = String::new();
     for (i, m) in results.iter().enumerate() {
         for r in budgets() {
             let t = at(i, r);
@@ -780,6 +784,29 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             regrets.push(q);
             if q > WORST_REGRET_GOAL {
                 above_goal.push(format!("{} at {r:.0e} ({q:.2})", m.name));
+                let (sel, o) = (selector(i, r), &m.obs);
+                let (e, trial_rays) = (sel.estimate, sel.estimate.trial_rays());
+                let _ = writeln!(
+                    why_above,
+                    "| {} | {r:.0e} | {q:.2} | {:.0} / {:.0} | {:.0} / {:.0} | {:.1} / {:.1} | {} | {} |",
+                    m.name,
+                    e.grid_ray_seconds * 1e9,
+                    o.grid_ray_ns,
+                    e.kd_ray_seconds * 1e9,
+                    o.kd_ray_ns,
+                    e.kd_build_seconds * 1e3,
+                    o.kd_build_ns * 1e-6,
+                    fmt_w(trial_rays),
+                    if r < sel.estimate.build_rays() {
+                        "grid"
+                    } else if sel.abandoned_s.is_some() {
+                        "abandoned"
+                    } else if !sel.confirmed {
+                        "dropped"
+                    } else {
+                        "kd-tree"
+                    },
+                );
             }
             decisions += 1;
             let sel = selector(i, r);
@@ -903,6 +930,15 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             above_goal.join(", ")
         }
     );
+    if !why_above.is_empty() {
+        let _ = writeln!(
+            md,
+            "Their estimates (leave-one-out) against the measurements: time per ray in ns, the \
+             kd-tree's build in ms, the budget from which a trial is built, and what AUTO did.\n\n\
+             | scene | R | regret | grid/ray est / meas | kd/ray est / meas | kd build est / meas | \
+             trial from | AUTO |\n|---|---:|---:|---:|---:|---:|---:|---|\n{why_above}"
+        );
+    }
 
     // Per-scene table.
     let _ = writeln!(md, "## Per scene\n");
@@ -1111,7 +1147,12 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     let mut err_pts = Vec::new();
     let mut over_pts = Vec::new();
     let _ = writeln!(md, "### Sample rays: accuracy against overhead\n");
-    let _ = writeln!(md, "| camera side | sample rays (median) | leave-one-out W* error | overhead at R = W* (median) |\n|---:|---:|---:|---:|");
+    let _ = writeln!(
+        md,
+        "The unknown budget's columns: AUTO with that many library samples and no budget (the \
+         online switch), over the scenes × budgets above: its regret's geometric mean and worst.\n"
+    );
+    let _ = writeln!(md, "| camera side | sample rays (median) | leave-one-out W* error | overhead at R = W* (median) | unknown budget: regret geometric mean | worst |\n|---:|---:|---:|---:|---:|---|");
     for (k, side) in SAMPLE_SIDES.iter().enumerate() {
         let mut e = cross_validated_errors(&with_side(results, k), &terms, 0, GridCost::Counted);
         let mut rays: Vec<f64> = results.iter().map(|m| m.samples[k].0.rays as f64).collect();
@@ -1126,11 +1167,27 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let (me, mr, mo) = (median(&mut e), median(&mut rays), median(&mut over));
         err_pts.push((mr, 100.0 * me));
         over_pts.push((mr, 100.0 * mo));
+        // The online switch with this side's samples (the known budget's selector is not used).
+        let (mut q, mut worst) = (Vec::new(), (1.0f64, String::new()));
+        for (i, m) in results.iter().enumerate() {
+            let unknown = selector_at(&loo_by_side, k, i);
+            for r in budgets() {
+                let t = totals(&m.obs, &unknown, &unknown, r, TRIAL_SHARE);
+                let x = t.auto_unknown / t.oracle;
+                q.push(x);
+                if x > worst.0 {
+                    worst = (x, format!("{} at {r:.0e}", m.name));
+                }
+            }
+        }
         let _ = writeln!(
             md,
-            "| {side} | {mr:.0} | {:.1} % | {:.3} % |",
+            "| {side} | {mr:.0} | {:.1} % | {:.3} % | {:.3} | {:.3} ({}) |",
             100.0 * me,
-            100.0 * mo
+            100.0 * mo,
+            geomean(&q),
+            worst.0,
+            worst.1
         );
     }
     write_chart(

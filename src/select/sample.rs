@@ -57,13 +57,31 @@ impl SampleParams {
     };
 }
 
+/// The largest camera side of the library's samples when the budget is unknown (`expected_rays
+/// = 0`): 8 × 8 camera rays and their bounces, at most 128 rays (88 on the evaluation's median
+/// scene). The samples are traced at the build, before any ray, and with no budget to cap them the
+/// default 24 × 24 (781 rays on the median scene) cost a small job nearly as much as its own rays:
+/// the online switch's worst regret was a thousand rays on the smallest scenes (sphereflake-1k,
+/// spd_teapot: 1.71–1.88 against the goal of 1.8). Measured in one evaluation run per row of
+/// docs/evaluation.md's "Sample rays" table (two runs at stop 31, the same measurements for
+/// every side): the unknown budget's regret, geometric mean over 31 scenes × 10³..10⁸ rays, rises
+/// with the side — 1.028/1.032 at 2, 1.037/1.034 at 8, 1.045 at 12, 1.051 at 16, 1.075/1.076 at
+/// 24, 1.17 at 48 — while its worst at every side up to 16 is an estimate's error that more
+/// samples do not fix (stadium-1M at 3·10⁷–10⁸ rays, 1.40–1.68). The renderer's own tapped rays
+/// replace the samples' estimate at `Scene::update` once 256 are held.
+pub const UNKNOWN_BUDGET_SIDE: u32 = 8;
+
 impl SampleParams {
     /// These parameters for a known budget of `expected_rays` (0 = unknown): the library's sample
     /// rays (about `2·side²`) are capped at 1/64 of the budget, with a floor of a 2 × 2 image, so
-    /// that sampling never costs a small budget more than about 1.5 % of its rays.
+    /// that sampling never costs a small budget more than about 1.5 % of its rays; an unknown
+    /// budget's side is capped at [`UNKNOWN_BUDGET_SIDE`].
     pub fn for_budget(&self, expected_rays: u64) -> SampleParams {
         if expected_rays == 0 {
-            return *self;
+            return SampleParams {
+                camera_side: self.camera_side.min(UNKNOWN_BUDGET_SIDE),
+                ..*self
+            };
         }
         let cap = (expected_rays / 128) as f64;
         let side = (crate::math::sqrt64(cap) as u32).clamp(2, self.camera_side.max(2));
@@ -149,4 +167,30 @@ fn sample_with(
         }
     }
     f
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An unknown budget samples at most an 8 × 8 image (a smaller side asked for is kept); a known
+    /// budget's cap is 1/64 of it, unchanged by the unknown budget's.
+    #[test]
+    fn the_sample_image_follows_the_budget() {
+        let side = |p: SampleParams, rays: u64| p.for_budget(rays).camera_side;
+        let d = SampleParams::DEFAULT;
+        assert_eq!(side(d, 0), UNKNOWN_BUDGET_SIDE);
+        let small = SampleParams {
+            camera_side: 5,
+            ..d
+        };
+        assert_eq!(side(small, 0), 5);
+        // 128·side² rays buy the side: 24 from 73 728 rays, 12 from 18 432, the floor 2 below.
+        assert_eq!(side(d, 73_728), 24);
+        assert_eq!(side(d, u64::MAX), 24);
+        assert_eq!(side(d, 18_432), 12);
+        assert_eq!(side(d, 18_431), 11);
+        assert_eq!(side(d, 1), 2);
+        assert_eq!(d.for_budget(0).seed, d.seed);
+    }
 }
