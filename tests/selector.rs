@@ -64,8 +64,8 @@ fn each_outcome_of_a_known_budget() {
     assert!((r.kd_ray_seconds - 1e-7).abs() < 1e-15);
 
     // The estimate at a budget of one ray came from a 2 × 2 sample image; the library's full set
-    // (used from 128·24² rays on, and with an unknown budget) gives the W* to decide at.
-    let full = Scene::build(&data.as_source(), &auto(0), &fast_kd).unwrap();
+    // (used from 128·24² rays on; an unknown budget samples 8 × 8) gives the W* to decide at.
+    let full = Scene::build(&data.as_source(), &auto(u64::MAX), &fast_kd).unwrap();
     let w_full = full.report().break_even_rays;
     assert!(w_full > 128.0 * 24.0 * 24.0, "{w_full}");
     let scene = Scene::build(&data.as_source(), &auto(w_full.ceil() as u64), &fast_kd).unwrap();
@@ -80,7 +80,7 @@ fn each_outcome_of_a_known_budget() {
     // `TRIAL_SHARE` of the grid's time; from there a trial build, which the check keeps on this scene
     // (the kd-tree saves work on the samples whatever the estimate said).
     let slow_kd = calibration(5000.0, 100.0);
-    let probe = Scene::build(&data.as_source(), &auto(0), &slow_kd).unwrap();
+    let probe = Scene::build(&data.as_source(), &auto(u64::MAX), &slow_kd).unwrap();
     let e = probe.report();
     assert_eq!(e.break_even_rays, f64::INFINITY);
     let trial = e.kd_build_seconds / (TRIAL_SHARE * e.grid_ray_seconds);
@@ -175,8 +175,10 @@ fn dear_build() -> Calibration {
     calibration(100.0, 10_000.0)
 }
 
+/// W* from the library's full set of samples: those of a budget above 128·24² rays (an unknown
+/// budget's are fewer).
 fn break_even_of_dear_build() -> u64 {
-    let w = Scene::build(&kd_friendly().as_source(), &auto(0), &dear_build())
+    let w = Scene::build(&kd_friendly().as_source(), &auto(u64::MAX), &dear_build())
         .unwrap()
         .report()
         .break_even_rays;
