@@ -62,13 +62,13 @@ impl SampleParams {
 /// scene). The samples are traced at the build, before any ray, and with no budget to cap them the
 /// default 24 × 24 (781 rays on the median scene) cost a small job nearly as much as its own rays:
 /// the online switch's worst regret was a thousand rays on the smallest scenes (sphereflake-1k,
-/// spd_teapot: 1.71–1.88 against the goal of 1.8). Measured in one evaluation run per row of
-/// docs/evaluation.md's "Sample rays" table (two runs at stop 31, the same measurements for
-/// every side): the unknown budget's regret, geometric mean over 31 scenes × 10³..10⁸ rays, rises
-/// with the side — 1.028/1.032 at 2, 1.037/1.034 at 8, 1.045 at 12, 1.051 at 16, 1.075/1.076 at
-/// 24, 1.17 at 48 — while its worst at every side up to 16 is an estimate's error that more
-/// samples do not fix (stadium-1M at 3·10⁷–10⁸ rays, 1.40–1.68). The renderer's own tapped rays
-/// replace the samples' estimate at `Scene::update` once 256 are held.
+/// spd_teapot: 1.71–1.92 against the goal of 1.8). Measured by docs/evaluation.md's "Sample
+/// rays" table, which prices every side on one run's measurements (four runs at stop 31): the
+/// unknown budget's regret, geometric mean over 31 scenes × 10³..10⁸ rays, rises with the side —
+/// 1.028–1.032 at 2, 1.034–1.038 at 8, 1.045–1.047 at 12, 1.051–1.054 at 16, 1.075–1.079 at 24,
+/// 1.17 at 48 — while its worst at every side up to 16 is an estimate's error that more samples do
+/// not fix (stadium-1M, tetra-10k or slivers-2k, 1.40–1.76). The renderer's own tapped rays replace
+/// the samples' estimate at `Scene::update` once 256 are held.
 pub const UNKNOWN_BUDGET_SIDE: u32 = 8;
 
 impl SampleParams {
