@@ -36,10 +36,10 @@ use rayq::select::fit::{fit_check_prices, CheckObservation, Observation};
 use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
-use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams};
+use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams, UNKNOWN_BUDGET_SIDE};
 use rayq::select::validate::{
-    best_variant, cross_validated_break_even, cross_validated_errors, cross_validated_estimates,
-    median, relative_error, GridCost, VARIANTS,
+    best_variant, cross_validated_break_even, cross_validated_errors,
+    cross_validated_estimates_for, median, relative_error, GridCost, VARIANTS,
 };
 #[cfg(feature = "peers")]
 use rayq::Ray;
@@ -690,11 +690,20 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         .zip(&measured)
         .map(|(e, m)| relative_error(*e, *m))
         .collect();
-    // The selector's estimate and sampling time depend on the budget: with R known, the library
-    // caps its sample rays (SampleParams::for_budget); take the measured side at or below the one it
-    // would use. With R unknown it uses the default side.
+    // The selector's estimate and sampling time depend on the budget: the library caps its sample
+    // rays (SampleParams::for_budget: by the budget when it is known, at UNKNOWN_BUDGET_SIDE when it
+    // is not); take the measured side at or below the one it would use. Its calibration is fitted
+    // on the default side's samples (as `calibrate` fits it) and applied to that side's features.
     let loo_by_side: Vec<Vec<CostEstimate>> = (0..SAMPLE_SIDES.len())
-        .map(|k| cross_validated_estimates(&with_side(results, k), &terms, 0, GridCost::Counted))
+        .map(|k| {
+            cross_validated_estimates_for(
+                &obs,
+                &with_side(results, k),
+                &terms,
+                0,
+                GridCost::Counted,
+            )
+        })
         .collect();
     let side_index = |r: f64| {
         let side = SampleParams::DEFAULT.for_budget(r as u64).camera_side;
@@ -797,14 +806,17 @@ fn analyse(results: &[Measured], args: &Args) -> String {
                     e.kd_build_seconds * 1e3,
                     o.kd_build_ns * 1e-6,
                     fmt_w(trial_rays),
-                    if r < sel.estimate.build_rays() {
-                        "grid"
-                    } else if sel.abandoned_s.is_some() {
-                        "abandoned"
-                    } else if !sel.confirmed {
-                        "dropped"
+                    // NaN estimates never build (as `totals` prices them).
+                    if sel.estimate.build_rays() <= r {
+                        if sel.abandoned_s.is_some() {
+                            "abandoned"
+                        } else if !sel.confirmed {
+                            "dropped"
+                        } else {
+                            "kd-tree"
+                        }
                     } else {
-                        "kd-tree"
+                        "grid"
                     },
                 );
             }
@@ -1150,7 +1162,9 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     let _ = writeln!(
         md,
         "The unknown budget's columns: AUTO with that many library samples and no budget (the \
-         online switch), over the scenes × budgets above: its regret's geometric mean and worst.\n"
+         online switch; the library uses a side of {UNKNOWN_BUDGET_SIDE}), over the scenes × \
+         budgets above: its regret's geometric mean and worst, the calibration fitted on the \
+         default side's samples (leave-one-out) and applied to that side's.\n"
     );
     let _ = writeln!(md, "| camera side | sample rays (median) | leave-one-out W* error | overhead at R = W* (median) | unknown budget: regret geometric mean | worst |\n|---:|---:|---:|---:|---:|---|");
     for (k, side) in SAMPLE_SIDES.iter().enumerate() {
@@ -1241,7 +1255,15 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         let me = median(&mut e);
         term_pts.push((n_terms as f64, 100.0 * me));
         let loo_t: Vec<Vec<CostEstimate>> = (0..SAMPLE_SIDES.len())
-            .map(|k| cross_validated_estimates(&with_side(results, k), &t, 0, GridCost::Counted))
+            .map(|k| {
+                cross_validated_estimates_for(
+                    &obs,
+                    &with_side(results, k),
+                    &t,
+                    0,
+                    GridCost::Counted,
+                )
+            })
             .collect();
         let (mean, (worst, at)) = regret_with(&loo_t);
         let _ = writeln!(

@@ -83,7 +83,8 @@ pub struct BuildOptions {
     pub grid: GridParams,
     /// kd-tree parameters; default [`KdTreeParams::DEFAULT`].
     pub kdtree: KdTreeParams,
-    /// The sample rays the selector makes when the caller gives none (`Auto` only).
+    /// The sample rays the selector makes when the caller gives none (`Auto` only), at most this
+    /// image, less for a small or unknown budget ([`SampleParams::for_budget`]).
     pub samples: SampleParams,
     /// Told the bytes the build would hold before each allocation of a build (including the one in
     /// [`Scene::update`]); a refusal fails it with [`BuildError::Cancelled`]. Default none.
@@ -601,7 +602,11 @@ impl Scene {
                 kd_tree_confirmed(&self.calibration, grid, &kd)
             }
             (_, _, Some(grid)) => {
-                let kd = sample_kdtree(&tree, &self.mesh, None, &self.options.samples);
+                // The same library samples as the grid's at the build (the budget's image side).
+                let params = self.options.samples.for_budget(self.options.expected_rays);
+                let kd = sample_kdtree(&tree, &self.mesh, None, &params);
+                // The same rays on both structures, whose answers are the same.
+                debug_assert_eq!((kd.rays, kd.hits), (grid.rays, grid.hits));
                 kd_tree_confirmed(&self.calibration, grid, &kd)
             }
             _ => true,

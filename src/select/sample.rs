@@ -42,7 +42,8 @@ impl RaySource for alloc::vec::Vec<Ray> {
 /// of a path tracer's first two bounces.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SampleParams {
-    /// Camera image side; `side²` primary rays. 0 = no sampling (the estimates are then NaN).
+    /// Camera image side; `side²` primary rays. 0 = no sampling (the estimates are then NaN). The
+    /// selector caps it by the budget ([`SampleParams::for_budget`]).
     pub camera_side: u32,
     /// Seed of the pixel jitter and the bounce directions (the samples are deterministic).
     pub seed: u64,
@@ -63,9 +64,9 @@ impl SampleParams {
 /// default 24 × 24 (781 rays on the median scene) cost a small job nearly as much as its own rays:
 /// the online switch's worst regret was a thousand rays on the smallest scenes (sphereflake-1k,
 /// spd_teapot: 1.71–1.92 against the goal of 1.8). Measured by docs/evaluation.md's "Sample
-/// rays" table, which prices every side on one run's measurements (four runs at stop 31): the
+/// rays" table, which prices every side on one run's measurements (five runs at stop 31): the
 /// unknown budget's regret, geometric mean over 31 scenes × 10³..10⁸ rays, rises with the side —
-/// 1.028–1.032 at 2, 1.034–1.038 at 8, 1.045–1.047 at 12, 1.051–1.054 at 16, 1.075–1.079 at 24,
+/// 1.028–1.032 at 2, 1.034–1.038 at 8, 1.044–1.047 at 12, 1.051–1.054 at 16, 1.075–1.079 at 24,
 /// 1.17 at 48 — while its worst at every side up to 16 is an estimate's error that more samples do
 /// not fix (stadium-1M, tetra-10k or slivers-2k, 1.40–1.76). The renderer's own tapped rays replace
 /// the samples' estimate at `Scene::update` once 256 are held.

@@ -62,21 +62,34 @@ pub fn cross_validated_estimates(
     folds: usize,
     grid: GridCost,
 ) -> Vec<CostEstimate> {
+    cross_validated_estimates_for(obs, obs, terms, folds, grid)
+}
+
+/// [`cross_validated_estimates`] with the calibrations fitted on `fitted` and each scene's
+/// estimate made from `seen[i]` (the same scenes, in the same order; for example sample rays other
+/// than the ones the calibration was fitted with, as the library sees them for a small budget).
+pub fn cross_validated_estimates_for(
+    fitted: &[Observation],
+    seen: &[Observation],
+    terms: &Terms,
+    folds: usize,
+    grid: GridCost,
+) -> Vec<CostEstimate> {
     let fold_of = |i: usize| if folds == 0 { i } else { i % folds };
     let none = CostEstimate {
         grid_ray_seconds: f64::NAN,
         kd_ray_seconds: f64::NAN,
         kd_build_seconds: f64::NAN,
     };
-    (0..obs.len())
+    (0..seen.len().min(fitted.len()))
         .map(|i| {
-            let rest: Vec<Observation> = obs
+            let rest: Vec<Observation> = fitted
                 .iter()
                 .enumerate()
                 .filter(|&(j, _)| fold_of(j) != fold_of(i))
                 .map(|(_, o)| *o)
                 .collect();
-            fit(&rest, terms, 0).map_or(none, |c| predicted_estimate(&c, &obs[i], grid))
+            fit(&rest, terms, 0).map_or(none, |c| predicted_estimate(&c, &seen[i], grid))
         })
         .collect()
 }

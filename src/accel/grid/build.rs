@@ -150,16 +150,27 @@ impl Kept {
             self.prims.set_len(written);
         }
         let room = self.room();
-        // One reallocation where doubling would take two on scenes of long triangles (hair: 6.65
-        // references a triangle against the first guess of 3), with an eighth to spare.
-        let projected = (written as f64 * total as f64 / done.max(1) as f64 * 1.125) as usize;
-        let room = room
+        let doubled = room
             .checked_add(room.max(64))
             .ok_or(BuildError::OutOfMemory {
                 what: "grid build scratch",
                 bytes: usize::MAX,
-            })?
-            .max(projected);
+            })?;
+        // One reallocation where doubling would take two on scenes of long triangles (hair: 6.65
+        // references a triangle against the first guess of 3), with an eighth to spare. At most
+        // four times the room (a prefix of long triangles must not reserve many times what the
+        // rest needs), and only within the memory limit, which doubling alone might still meet.
+        let projected = (written as f64 * total as f64 / done.max(1) as f64 * 1.125) as usize;
+        let projected = projected.min(room.saturating_mul(4));
+        let extra = projected
+            .saturating_sub(room)
+            .saturating_mul(2 * core::mem::size_of::<u32>());
+        let fits = budget.limit() == 0 || budget.used().saturating_add(extra) <= budget.limit();
+        let room = if fits {
+            doubled.max(projected)
+        } else {
+            doubled
+        };
         budget.reserve_to(&mut self.cells, room, "grid build scratch")?;
         budget.reserve_to(&mut self.prims, room, "grid build scratch")
     }
@@ -178,7 +189,7 @@ fn keep_cells(
 ) -> Result<Kept, BuildError> {
     let tris = mesh.triangles();
     let n = members.len(mesh);
-    // About 2.5 references per triangle on well-shaped scenes; the vectors double past that.
+    // About 2.5 references per triangle on well-shaped scenes; the vectors grow past that (`grow`).
     let guess = n.saturating_mul(3).max(64);
     let mut kept = Kept {
         cells: budget.vec::<u32>(guess, "grid build scratch")?,
