@@ -442,3 +442,28 @@ pub(super) fn gather_blocks(
     tris.extend(ids.iter().map(|&four| Block4::gather(all, four)));
     Ok(tris)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each mask's row lists the offsets of its set bits' corners in bit order, then zeros, and
+    /// the count table counts the bits.
+    #[test]
+    fn small_cell_offsets_pack_the_masks_cells_in_bit_order() {
+        let corner = [0, 1, 10, 11, 100, 101, 110, 111];
+        let mut budget = MemoryBudget::new(0);
+        let table = small_cell_offsets(&corner, &mut budget).unwrap();
+        assert_eq!(table.len(), 256);
+        for (mask, row) in table.iter().enumerate() {
+            let want: Vec<u32> = (0..8)
+                .filter(|b| mask >> b & 1 != 0)
+                .map(|b| corner[b] as u32)
+                .collect();
+            assert_eq!(CELL_COUNT[mask] as usize, want.len(), "mask {mask:#b}");
+            assert_eq!(&row[..want.len()], &want[..], "mask {mask:#b}");
+            assert!(row[want.len()..].iter().all(|&c| c == 0), "mask {mask:#b}");
+        }
+        budget.free(table);
+    }
+}
