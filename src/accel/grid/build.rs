@@ -264,26 +264,30 @@ fn keep_cells(
                 len += CELL_COUNT[mask as usize & 0xff] as usize;
             }
             Overlap::Large(fp) => {
-                // SAFETY: the first `len` elements of both were written (above, or here before).
-                unsafe {
-                    kept.cells.set_len(len);
-                    kept.prims.set_len(len);
-                }
+                // As above, through raw pointers up to `len`, the room checked per cell (a long
+                // triangle's cells are many, and two checked pushes each cost twice as much).
                 cells.for_each_large(tri, &fp, exact, &mut |cell| {
-                    if kept.cells.len() == kept.room() && failed.is_none() {
-                        if let Err(e) = kept.grow(kept.cells.len(), (i + 1, n), budget) {
+                    if len == kept.room() {
+                        if failed.is_some() {
+                            return;
+                        }
+                        if let Err(e) = kept.grow(len, (i + 1, n), budget) {
                             failed = Some(e);
+                            return;
                         }
                     }
-                    if kept.cells.len() < kept.room() {
-                        kept.cells.push(cell);
-                        kept.prims.push(prim as u32);
+                    debug_assert!(len < kept.room());
+                    let (out, ids) = (kept.cells.as_mut_ptr(), kept.prims.as_mut_ptr());
+                    // SAFETY: `len` is below both capacities (above).
+                    unsafe {
+                        out.add(len).write(cell);
+                        ids.add(len).write(prim as u32);
                     }
+                    len += 1;
                 });
                 if failed.is_some() {
                     break;
                 }
-                len = kept.cells.len();
             }
         }
     }
