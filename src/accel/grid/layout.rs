@@ -57,7 +57,17 @@ impl Shape {
         // A the coordinates' magnitude); a margin of twice that covers it. 16u·A covers the A part,
         // 16u·extent lets every origin within two extents of the grid qualify, and 1/64 of a cell
         // extends that to 32768 cells.
-        let margin = cell_size * (1.0 / 64.0) + Vec3::splat(16.0 * U32 * (abs_scale + extent));
+        let mut margin = cell_size * (1.0 / 64.0) + Vec3::splat(16.0 * U32 * (abs_scale + extent));
+        if !margin.is_finite() && cell_size.is_finite() {
+            // `abs_scale + extent` overflowed f32 (a scene reaching ±1e38): the same sum in f64.
+            // An infinite margin put every triangle's footprint over the whole grid, where the
+            // exact overlap's arithmetic then refused every cell (a fuzzing helper's finding).
+            let wide = 16.0 * f64::from(U32) * (f64::from(abs_scale) + f64::from(extent));
+            margin = cell_size
+                .to_array()
+                .map(|c| (f64::from(c) / 64.0 + wide) as f32)
+                .into();
+        }
         let near_reach = margin.min_element() / (8.0 * U32) - 2.0 * abs_scale;
         Ok(Shape {
             bounds,
@@ -74,6 +84,14 @@ impl Shape {
         self.res[0] as usize * self.res[1] as usize * self.res[2] as usize
     }
 }
+
+/// The narrowest cell a grid makes (2^-100): a scene far smaller than that across gets fewer,
+/// wider cells. Below about 2^-128 the inverse of a cell's width overflows f32 and the insertion
+/// listed every triangle in the last cell only, and a subnormal width leaves the planes
+/// `min + k·size` with a fraction of f32's precision (a fuzzing helper's finding: a scene 1e-37
+/// across at a high density lost its hits). The margin of 2^26 above 2^-126 keeps products of a
+/// cell's units with the margins and slacks normal too.
+const MIN_CELL: f64 = 7.888_609_052_210_118e-31;
 
 /// The padded box and cells per axis for `live` triangles in `tight` at density `lambda`.
 fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), BuildError> {
@@ -122,6 +140,15 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
         }
         if !changed {
             break;
+        }
+    }
+    // No cell narrower than MIN_CELL: the insertion's f32 cell units (`1/cell_size` and what it
+    // multiplies) must stay in f32's normal range.
+    let padded = bounds.max - bounds.min;
+    for (a, r) in res.iter_mut().enumerate() {
+        let most = math::floor64(f64::from(padded[a]) / MIN_CELL).max(1.0);
+        if f64::from(*r) > most {
+            *r = most as u32;
         }
     }
     let cells = u64::from(res[0]) * u64::from(res[1]) * u64::from(res[2]);

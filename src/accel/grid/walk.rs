@@ -716,9 +716,16 @@ fn next_up(x: f32) -> f32 {
 /// `[1, 2)`: the same line, with a direction whose t keeps f32's precision. In two steps, so each
 /// factor is a normal f32.
 fn unit_scaled(d: Vec3, largest: f32) -> Vec3 {
-    let e = ((largest.to_bits() >> 23) & 0xff) as i32;
-    // A subnormal largest component (biased exponent 0) needs the factor for 2^-126 and more.
-    let k = 127 - e.max(1) + if e == 0 { 23 } else { 0 };
+    let bits = largest.to_bits() & 0x7fff_ffff;
+    let e = (bits >> 23) as i32;
+    // A subnormal largest component (biased exponent 0) is `bits·2^-149`, its leading bit at
+    // `31 − leading_zeros`: the factor is counted from that bit, not from 2^-126 (a fixed 2^149
+    // left it between 1 and 2^23, whose t then came out subnormal: a fuzzing helper's finding).
+    let k = if e == 0 {
+        149 - (31 - bits.leading_zeros() as i32)
+    } else {
+        127 - e
+    };
     let (k1, k2) = (k / 2, k - k / 2);
     let pow2 = |k: i32| f32::from_bits(((k + 127) as u32) << 23);
     d * pow2(k1) * pow2(k2)
@@ -747,4 +754,27 @@ fn entry_point(o: Vec3, d: Vec3, lo: Vec3, hi: Vec3) -> Option<Vec3> {
     }
     let p = |a: usize| (f64::from(o[a]) + enter * f64::from(d[a])) as f32;
     Some(Vec3::new(p(0), p(1), p(2)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alloc::vec;
+
+    /// The scaled direction's largest component is in [1, 2) and the others are scaled by the
+    /// same power of two, for largest components across f32's range, subnormal ones included.
+    #[test]
+    fn unit_scaled_brings_the_largest_component_into_one_to_two() {
+        let mut cases = vec![f32::MAX, 3.0e38, 1.5, 1.0, 0.75, 1e-30, f32::MIN_POSITIVE];
+        cases.extend((0..23).map(|b| f32::from_bits(1 << b)));
+        cases.extend([f32::from_bits(0x007f_ffff), f32::from_bits(0x0000_0003)]);
+        for largest in cases {
+            let d = Vec3::new(-largest, largest * 0.5, 0.0);
+            let s = unit_scaled(d, largest);
+            let m = s.abs().max_element();
+            assert!((1.0..2.0).contains(&m), "{largest:e}: {s:?}");
+            // A power of two: exact for the largest component, and the ratio is kept.
+            assert_eq!(s.x, -m, "{largest:e}: {s:?}");
+        }
+    }
 }
