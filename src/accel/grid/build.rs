@@ -217,8 +217,8 @@ fn keep_cells(
         }
     };
     // The references are written through raw pointers up to `len`, and the vectors' lengths set
-    // from `len` only where the vectors are used themselves (large footprints, the end): the
-    // length stays in a register instead of going through memory on every store.
+    // from `len` only where the vectors are used themselves (`Kept::grow`, the end): the length
+    // stays in a register instead of going through memory on every store.
     let mut len = 0;
     for i in 0..n {
         let prim = members.prim(i);

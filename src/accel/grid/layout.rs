@@ -68,7 +68,24 @@ impl Shape {
                 .map(|c| (f64::from(c) / 64.0 + wide) as f32)
                 .into();
         }
-        let near_reach = margin.min_element() / (8.0 * U32) - 2.0 * abs_scale;
+        let mut near_reach = margin.min_element() / (8.0 * U32) - 2.0 * abs_scale;
+        if !near_reach.is_finite() {
+            // Overflowed (a margin above ~2^-21 of f32::MAX, a scene reaching ±1e38): the same in
+            // f64, rounded down to f32 and at most f32::MAX, so an origin whose own f32 reach
+            // overflows is walked as a far one, never claimed to be covered by the margin.
+            let exact = f64::from(margin.min_element()) / (8.0 * f64::from(U32))
+                - 2.0 * f64::from(abs_scale);
+            // At least 0: the margin is at least 2^-20 of the sum that overflowed, so its 2^21
+            // times is at least 2A.
+            let capped = exact.clamp(0.0, f64::from(f32::MAX));
+            let rounded = capped as f32;
+            near_reach = if f64::from(rounded) > capped {
+                // Positive (above `capped ≥ 0`): the next f32 below is one step of its bits.
+                f32::from_bits(rounded.to_bits() - 1)
+            } else {
+                rounded
+            };
+        }
         Ok(Shape {
             bounds,
             res,

@@ -49,9 +49,11 @@ type Poly = [[f64; 3]; CAP];
 /// Bounds of the part of `tri` inside `b` (Sutherland–Hodgman against the six planes, in f64,
 /// rounded outward to f32 and clamped to `b`), or [`Aabb::EMPTY`] when it misses `b`.
 ///
-/// Guarantees: the result contains every point of `tri` that lies in `b` (when rounding leaves the
-/// clipped polygon empty or odd, it falls back to the triangle's bounds clamped to `b`, which is
-/// larger and still right).
+/// Guarantees, at the scales the tests use: the result contains every point of `tri` that lies in
+/// `b` (when rounding leaves the clipped polygon empty or odd, it falls back to the triangle's
+/// bounds clamped to `b`, which is larger and still right). Its crossings are not widened as
+/// [`split_bounds`]' are, so a box far smaller than the triangle's vertices may lose a sliver: a
+/// test oracle for ordinary scenes, not part of the build.
 #[cfg(test)]
 fn clipped_bounds(tri: &[Vec3; 3], b: &Aabb) -> Aabb {
     let tb = Aabb::of_triangle(tri);
@@ -176,10 +178,11 @@ fn clip_plane<const A: usize>(
 
 /// The bounds of the parts of `tri` on either side of the plane `x[axis] = pos`, each intersected
 /// with `part` (the bounds of the triangle's part in the node being split) and with its side: the
-/// vertices on each side and the points where the edges cross the plane (in f64, rounded outward to
-/// f32). One plane instead of the child box's six: the result contains the exact part of the
-/// triangle in each child (a subset of both the part in the node and the part on that side of the
-/// plane), and is at most the box [`clipped_bounds`] gives plus what the node's box already cut.
+/// vertices on each side and the points where the edges cross the plane (in f64, widened by their
+/// rounding error and rounded outward to f32). One plane instead of the child box's six: the result
+/// contains the exact part of the triangle in each child (a subset of both the part in the node and
+/// the part on that side of the plane), and is at most the box [`clipped_bounds`] gives plus what
+/// the node's box already cut and the crossings' widening.
 /// A side the triangle does not reach is [`Aabb::EMPTY`].
 ///
 /// The vertices are f32 already, so only the edge crossings are computed (in f64) and rounded; the
@@ -210,11 +213,12 @@ pub(super) fn split_bounds(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) 
             for k in 0..3 {
                 if k != axis {
                     let x = a[k] + (b[k] - a[k]) * t;
-                    // The f64 crossing is off by at most 7u·(|a_k| + |b_k|) (u = 2^-53: one
-                    // rounding each in the two differences, the quotient, the product and the sum,
-                    // with t in [0, 1]); widened by twice that before rounding outward. Without it a
-                    // crossing far smaller than the vertices (a plane at 1e-21 through a unit
-                    // triangle) lost a sliver of its part: a fuzzing helper's finding.
+                    // The f64 crossing is off by at most about 6u·(|a_k| + |b_k|) (u = 2^-53: one
+                    // rounding each in the three differences, the quotient, the product and the
+                    // sum, with t in [0, 1]), and `x ± err` rounds once more; widened by 16u before
+                    // rounding outward. Without it a crossing far smaller than the vertices (a
+                    // plane at 1e-21 through a unit triangle) lost a sliver of its part: a fuzzing
+                    // helper's finding.
                     let err = 8.0 * f64::EPSILON * (a[k].abs() + b[k].abs());
                     xl[k] = round_down(x - err);
                     xh[k] = round_up(x + err);
