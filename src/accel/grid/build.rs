@@ -205,17 +205,24 @@ fn keep_cells(
     let mut failed = None;
     let degenerate = mesh.degenerate_bits();
     // For each mask of a small footprint's cells, the flat offsets of its cells from the
-    // footprint's corner, packed to the front in bit order (the rest 0), in the u32 of the kept
-    // cells (a cell's index is below `u32::MAX`, so the kept cells' sums do not wrap): a
-    // triangle's cells are then two 4-lane adds and stores, where a store per corner and a
-    // length advanced by its bit took ~33 instructions a triangle (a quarter of bunny's count pass).
-    let corners = match small_cell_offsets(&cells.corner, budget) {
-        Ok(t) => t,
-        Err(e) => {
-            kept.release(budget);
-            return Err(e);
+    // footprint's corner ([`small_cells`]), in the u32 of the kept cells (a cell's index is below
+    // `u32::MAX`, so the kept cells' sums do not wrap): a triangle's cells are then two 4-lane adds
+    // and stores, where a store per corner and a length advanced by its bit took ~33 instructions a
+    // triangle (a quarter of bunny's count pass). The table costs about as much as a hundred
+    // triangles, so a grid of fewer than `SMALL_CELLS_TABLE_MIN` members makes each row when it
+    // needs it instead (a grid of four triangles took twice its build to make the table).
+    let corners = if n >= SMALL_CELLS_TABLE_MIN {
+        match small_cells_table(&cells.corner, budget) {
+            Ok(t) => t,
+            Err(e) => {
+                kept.release(budget);
+                return Err(e);
+            }
         }
+    } else {
+        Vec::new()
     };
+    let table = !corners.is_empty();
     // The references are written through raw pointers up to `len`, and the vectors' lengths set
     // from `len` only where the vectors are used themselves (`Kept::grow`, the end): the length
     // stays in a register instead of going through memory on every store.
@@ -251,10 +258,14 @@ fn keep_cells(
                 // All eight slots are stored and the length advanced by the cells' count, without
                 // a branch per cell (how many cells a triangle has is hard to predict): the slots
                 // past the count are overwritten or left beyond the length.
-                let row = corners
-                    .get(mask as usize & 0xff)
-                    .copied()
-                    .unwrap_or_default();
+                let m = mask as usize & 0xff;
+                let row = if table {
+                    debug_assert_eq!(corners.len(), 256);
+                    // SAFETY: `m ≤ 255`, and a table holds a row for each of the 256 masks.
+                    unsafe { *corners.get_unchecked(m) }
+                } else {
+                    small_cells(m, &cells.corner)
+                };
                 // SAFETY: both vectors have room for 8 elements from `len` (above).
                 unsafe {
                     out.add(len)
@@ -323,22 +334,41 @@ const CELL_COUNT: [u8; 256] = {
     t
 };
 
-/// For each mask of the eight cells `i, j, k` of a small footprint (bit `i + 2j + 4k`), the
-/// offsets `corner[bit]` of its cells in bit order, then zeros; charged to `budget`.
-fn small_cell_offsets(
+/// Grids of at least this many members make [`small_cells_table`] (it costs about as much as a
+/// hundred triangles' cells).
+const SMALL_CELLS_TABLE_MIN: usize = 256;
+
+/// [`small_cells`] of every mask, charged to `budget`: each row from the one without the mask's
+/// highest bit, with that bit's corner appended (a few instructions a row).
+fn small_cells_table(
     corner: &[usize; 8],
     budget: &mut MemoryBudget,
 ) -> Result<Vec<[u32; 8]>, BuildError> {
     let mut table = budget.vec::<[u32; 8]>(256, "grid build scratch")?;
-    table.extend((0..256u32).map(|mask| {
-        let mut row = [0u32; 8];
-        let set = (0..8).filter(|b| mask >> b & 1 != 0);
-        for (slot, b) in row.iter_mut().zip(set) {
-            *slot = corner[b] as u32;
+    table.push([0; 8]);
+    for mask in 1..256usize {
+        let high = 31 - (mask as u32).leading_zeros() as usize;
+        let rest = mask ^ (1 << high);
+        let mut row = table.get(rest).copied().unwrap_or_default();
+        if let Some(slot) = row.get_mut(usize::from(CELL_COUNT[rest])) {
+            *slot = corner[high & 7] as u32;
         }
-        row
-    }));
+        table.push(row);
+    }
     Ok(table)
+}
+
+/// The offsets `corner[bit]` of the cells of `mask` (bit `i + 2j + 4k` for the cell `i, j, k` of
+/// a small footprint), in bit order, then zeros.
+#[cold]
+#[inline(never)]
+fn small_cells(mask: usize, corner: &[usize; 8]) -> [u32; 8] {
+    let mut row = [0u32; 8];
+    let set = (0..8).filter(|b| mask >> b & 1 != 0);
+    for (slot, b) in row.iter_mut().zip(set) {
+        *slot = corner[b] as u32;
+    }
+    row
 }
 
 /// Counts each kept cell in its slot of `counts`, in a pass of its own: in the loop that finds the
@@ -454,12 +484,14 @@ mod tests {
     /// Each mask's row lists the offsets of its set bits' corners in bit order, then zeros, and
     /// the count table counts the bits.
     #[test]
-    fn small_cell_offsets_pack_the_masks_cells_in_bit_order() {
+    fn small_cells_pack_the_masks_cells_in_bit_order() {
         let corner = [0, 1, 10, 11, 100, 101, 110, 111];
         let mut budget = MemoryBudget::new(0);
-        let table = small_cell_offsets(&corner, &mut budget).unwrap();
+        let table = small_cells_table(&corner, &mut budget).unwrap();
         assert_eq!(table.len(), 256);
-        for (mask, row) in table.iter().enumerate() {
+        for mask in 0..256 {
+            let row = small_cells(mask, &corner);
+            assert_eq!(table[mask], row, "mask {mask:#b}");
             let want: Vec<u32> = (0..8)
                 .filter(|b| mask >> b & 1 != 0)
                 .map(|b| corner[b] as u32)
