@@ -136,9 +136,12 @@ impl Aabb {
     /// The bounds of a triangle.
     #[inline]
     pub fn of_triangle(t: &[Vec3; 3]) -> Aabb {
+        // Four lanes at a time (the fourth unused): the same comparisons as `Vec3`'s `min`/`max`
+        // lane by lane (`a < b ? a : b`), in a third of the instructions.
+        let [a, b, c] = t.map(glam::Vec3A::from);
         Aabb {
-            min: t[0].min(t[1]).min(t[2]),
-            max: t[0].max(t[1]).max(t[2]),
+            min: a.min(b).min(c).into(),
+            max: a.max(b).max(c).into(),
         }
     }
 }

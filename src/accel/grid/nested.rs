@@ -4,7 +4,7 @@
 //! (Ize, Shirley and Parker's recursive grids, at most [`MAX_DEPTH`] deep; docs/design.md,
 //! "Nested grids").
 
-use glam::{Vec3, Vec3A};
+use glam::Vec3;
 
 use alloc::vec::Vec;
 
@@ -161,33 +161,21 @@ fn nest_cell(
         }
     };
     let tris = mesh.triangles();
-    let size = Vec3A::from(grid.shape.cell_size);
-    // Four lanes at a time (the fourth unused): the mesh's coordinates are finite, so the SSE
-    // `min`/`max` need no NaN handling (the scalar `Aabb` forms took ~90 instructions a triangle,
-    // a tenth of stadium-1M's grid build).
-    let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    let size = grid.shape.cell_size;
+    let mut small_bounds = Aabb::EMPTY;
     for &p in list.iter().filter(|&&p| p != Hit::INVALID_ID) {
         let Some(tri) = tris.get(p as usize) else {
             continue;
         };
-        let [a, b, c] = tri.map(Vec3A::from);
-        let (t_lo, t_hi) = (a.min(b).min(c), a.max(b).max(c));
-        if (t_hi - t_lo).cmpgt(size).any() {
+        // A triangle's box is never empty: its extent needs no emptiness test.
+        let bounds = Aabb::of_triangle(tri);
+        if (bounds.max - bounds.min).cmpgt(size).any() {
             large.push(p);
         } else {
             small.push(p);
-            lo = lo.min(t_lo);
-            hi = hi.max(t_hi);
+            small_bounds = small_bounds.union(bounds);
         }
     }
-    let small_bounds = if small.is_empty() {
-        Aabb::EMPTY
-    } else {
-        Aabb {
-            min: lo.into(),
-            max: hi.into(),
-        }
-    };
     let n = small.len() + large.len();
     let result = if n < NESTED_MIN || 2 * large.len() > n {
         Ok(None)
