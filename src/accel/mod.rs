@@ -189,7 +189,28 @@ pub(crate) fn test_blocks<T: TriangleTest, const ANY: bool>(
     best: &mut Hit,
     mailbox: &mut Mailbox,
 ) -> Option<Hit> {
-    for (b, block) in tris.iter().enumerate() {
+    // Two blocks per pass of the filter where the kernel filters pairs (the last block of an odd
+    // list then goes alone below); otherwise one at a time.
+    let mut single_from = 0;
+    if T::PAIRS {
+        for (p, pair) in tris.chunks_exact(2).enumerate() {
+            let survivors = test.survivors_pair(&pair[0], &pair[1]);
+            if survivors == 0 {
+                continue;
+            }
+            for (half, block) in pair.iter().enumerate() {
+                let lanes = (survivors >> (4 * half)) & 0b1111;
+                let id = |lane: usize| id(2 * p + half, lane);
+                if lanes != 0 {
+                    if let Some(h) = test_lanes::<T, ANY>(test, block, lanes, id, best, mailbox) {
+                        return Some(h);
+                    }
+                }
+            }
+        }
+        single_from = tris.len() & !1;
+    }
+    for (b, block) in tris.iter().enumerate().skip(single_from) {
         let survivors = test.survivors(block);
         if survivors == 0 {
             continue;
@@ -262,14 +283,18 @@ mod tests {
     use crate::triangle::testgen::pair;
     use crate::workload::SplitMix64;
 
-    /// Both answers of the list test on `ids[start..end]` (closest, any) for `ray`.
+    /// Both answers of the list test on `ids[start..end]` (closest, any) for `ray`, as queries
+    /// run it (`plain == false`: the AVX walks where the processor has them) or with the four-lane
+    /// kernels whatever the processor (`plain == true`).
     fn list_answers(
         mesh: &TriMesh,
         packs: &TrianglePacks,
         ids: &[u32],
         range: (usize, usize),
         ray: &Ray,
+        plain: bool,
     ) -> (Hit, bool) {
+        #[derive(Clone, Copy)]
         struct List<'a, const ANY: bool> {
             mesh: &'a TriMesh,
             packs: &'a TrianglePacks,
@@ -296,32 +321,34 @@ mod tests {
                 any.unwrap_or(best)
             }
         }
-        let closest = run_query(
+        fn run<L: TriangleLoop<Output = Hit>>(
+            mesh: &TriMesh,
+            ray: &Ray,
+            lp: L,
+            plain: bool,
+        ) -> Hit {
+            if !plain {
+                return run_query(mesh, Aabb::EMPTY, ray, None, lp);
+            }
+            PreparedRay::prepare(ray, &mesh.bounds())
+                .map_or(Hit::MISS, |r| r.dispatch_plain(None, lp))
+        }
+        let closest = List::<false> {
             mesh,
-            Aabb::EMPTY,
-            ray,
-            None,
-            List::<false> {
-                mesh,
-                packs,
-                ids,
-                range,
-            },
-        );
-        let any = run_query(
+            packs,
+            ids,
+            range,
+        };
+        let any = List::<true> {
             mesh,
-            Aabb::EMPTY,
-            ray,
-            None,
-            List::<true> {
-                mesh,
-                packs,
-                ids,
-                range,
-            },
+            packs,
+            ids,
+            range,
+        };
+        (
+            run(mesh, ray, closest, plain),
+            run(mesh, ray, any, plain).is_hit(),
         )
-        .is_hit();
-        (closest, any)
     }
 
     /// The scalar test on every triangle, for `ray`.
@@ -377,15 +404,18 @@ mod tests {
             let shift = 1 + rng.below(3);
             let mut shifted = alloc::vec![Hit::INVALID_ID; shift];
             shifted.extend(0..n as u32);
-            let for_packed = list_answers(&mesh, &packed, &ids, (0, n), &ray);
-            let for_indexed = list_answers(
-                &mesh,
-                &TrianglePacks::default(),
-                &shifted,
-                (shift, shift + n),
-                &ray,
-            );
-            for (label, (closest, any)) in [("packed", for_packed), ("indexed", for_indexed)] {
+            let packed_lists = |plain| list_answers(&mesh, &packed, &ids, (0, n), &ray, plain);
+            let indexed = TrianglePacks::default();
+            let indexed_lists = |plain| {
+                let range = (shift, shift + n);
+                list_answers(&mesh, &indexed, &shifted, range, &ray, plain)
+            };
+            for (label, (closest, any)) in [
+                ("packed", packed_lists(false)),
+                ("packed, four lanes", packed_lists(true)),
+                ("indexed", indexed_lists(false)),
+                ("indexed, four lanes", indexed_lists(true)),
+            ] {
                 assert!(
                     closest.same_bits(&want) && any == want.is_hit(),
                     "{label}: ray {ray:?} triangles {tris:?}: got {closest:?} (any {any}), want {want:?}"

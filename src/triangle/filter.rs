@@ -245,12 +245,63 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
     ray: &FilterRay<L>,
     block: &Block4,
 ) -> u32 {
+    survivors_of::<L, KZ, SWAP>(ray, &OneBlock(block), 0b1111)
+}
+
+/// [`survivors`] of two blocks at once in eight AVX lanes (bits 0..4 for `a`, 4..8 for `b`): the
+/// same operations lane by lane, so the same answer as two calls.
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+#[inline(always)]
+pub(crate) fn survivors_pair<const KZ: usize, const SWAP: bool>(
+    ray: &FilterRay<super::lanes::avx::Avx>,
+    a: &Block4,
+    b: &Block4,
+) -> u32 {
+    survivors_of::<super::lanes::avx::Avx, KZ, SWAP>(ray, &TwoBlocks(a, b), 0xff)
+}
+
+/// Where the filter reads its lanes: row `k` is coordinate `k % 3` of vertex `k / 3`. A trait
+/// rather than a closure so that every read is forced inline (in the AVX walks a closure stayed
+/// out of line).
+trait Rows<L> {
+    fn row(&self, k: usize) -> L;
+}
+
+/// One block's four lanes.
+struct OneBlock<'a>(&'a Block4);
+
+impl<L: Lanes> Rows<L> for OneBlock<'_> {
+    #[inline(always)]
+    fn row(&self, k: usize) -> L {
+        L::load(&self.0.v[k])
+    }
+}
+
+/// Two blocks' eight lanes.
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+struct TwoBlocks<'a>(&'a Block4, &'a Block4);
+
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+impl Rows<super::lanes::avx::Avx> for TwoBlocks<'_> {
+    #[inline(always)]
+    fn row(&self, k: usize) -> super::lanes::avx::Avx {
+        super::lanes::avx::Avx::load_pair(&self.0.v[k], &self.1.v[k])
+    }
+}
+
+/// The filter on the lanes `row(k)` gives for coordinate row `k` (`a.x, a.y, a.z, b.x, …`), all of
+/// whose lanes are `full`.
+#[inline(always)]
+fn survivors_of<L: Lanes, const KZ: usize, const SWAP: bool>(
+    ray: &FilterRay<L>,
+    row: &impl Rows<L>,
+    full: u32,
+) -> u32 {
     let [kx, ky] = axes::<KZ, SWAP>();
     let k = [kx, ky, KZ];
-    let v = &block.v;
-    let (ax, ay, az) = sheared(&v[0..3], k, ray.o, ray.s);
-    let (bx, by, bz) = sheared(&v[3..6], k, ray.o, ray.s);
-    let (cx, cy, cz) = sheared(&v[6..9], k, ray.o, ray.s);
+    let (ax, ay, az) = sheared(row, 0, k, ray.o, ray.s);
+    let (bx, by, bz) = sheared(row, 3, k, ray.o, ray.s);
+    let (cx, cy, cz) = sheared(row, 6, k, ray.o, ray.s);
     let u = cx.mul(by).sub(cy.mul(bx));
     let v = ax.mul(cy).sub(ay.mul(cx));
     let w = bx.mul(ay).sub(by.mul(ax));
@@ -258,10 +309,9 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
     // that is the largest above it and the smallest below its negative. The comparisons are negated
     // ones, so that an unused lane (NaN everywhere) is rejected by the same test.
     let (most, least) = (u.max(v).max(w), u.min(v).min(w));
-    let rejected = |bound: L, low: L| L::bits(L::and(most.nle(bound), least.nge(low)));
     // First against the scene's bound (at least every lane's): most blocks are settled here,
     // without their own bounds.
-    if rejected(ray.scene_bound, ray.scene_low) == 0b1111 {
+    if rejected_lanes(most, least, ray.scene_bound, ray.scene_low) == full {
         return 0;
     }
     let s = ax
@@ -272,11 +322,18 @@ pub(crate) fn survivors<L: Lanes, const KZ: usize, const SWAP: bool>(
         .max(cx.abs().max(cy.abs()));
     let z = az.abs().max(bz.abs()).max(cz.abs());
     let bound = bound(s, z);
-    let live = !rejected(bound, bound.neg()) & 0b1111;
+    let live = !rejected_lanes(most, least, bound, bound.neg()) & full;
     if live == 0 || !ray.check_window {
         return live;
     }
     live & !outside_window(ray, [u, v, w], [az, bz, cz], z, bound)
+}
+
+/// The lanes where `most` is above `bound` and `least` below `low` (or NaN). A function rather than
+/// a closure so that it is forced inline (in the AVX walks a closure stayed out of line).
+#[inline(always)]
+fn rejected_lanes<L: Lanes>(most: L, least: L, bound: L, low: L) -> u32 {
+    L::bits(L::and(most.nle(bound), least.nge(low)))
 }
 
 /// The lanes whose crossing is certainly outside the ray's window (module docs, "The window
@@ -336,13 +393,20 @@ fn bound<L: Lanes>(s: L, z: L) -> L {
         .add(L::splat(EDGE_FLOOR))
 }
 
-/// One vertex's lanes (`p`: its x, y, z rows) translated by `o` and sheared by `s` along the axes
-/// `k = [kx, ky, kz]`. A function rather than a closure so that it can be forced inline: as a
-/// closure it stayed out of line in the kd-tree's walk (three calls per block, measured).
+/// One vertex's lanes (rows `first..first + 3` of `row`: its x, y, z) translated by `o` and sheared
+/// by `s` along the axes `k = [kx, ky, kz]`. A function rather than a closure so that it can be
+/// forced inline: as a closure it stayed out of line in the kd-tree's walk (three calls per block,
+/// measured).
 #[inline(always)]
-fn sheared<L: Lanes>(p: &[[f32; 4]], k: [usize; 3], o: [L; 3], s: [L; 2]) -> (L, L, L) {
-    let z = L::load(&p[k[2]]).sub(o[2]);
-    let x = L::load(&p[k[0]]).sub(o[0]).sub(s[0].mul(z));
-    let y = L::load(&p[k[1]]).sub(o[1]).sub(s[1].mul(z));
+fn sheared<L: Lanes>(
+    row: &impl Rows<L>,
+    first: usize,
+    k: [usize; 3],
+    o: [L; 3],
+    s: [L; 2],
+) -> (L, L, L) {
+    let z = row.row(first + k[2]).sub(o[2]);
+    let x = row.row(first + k[0]).sub(o[0]).sub(s[0].mul(z));
+    let y = row.row(first + k[1]).sub(o[1]).sub(s[1].mul(z));
     (x, y, z)
 }

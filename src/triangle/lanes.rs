@@ -297,6 +297,157 @@ mod sse2 {
     }
 }
 
+/// Eight f32 lanes in AVX registers, for the filter of two blocks at once (x86-64 with the `avx`
+/// feature; the processor is asked at run time, [`avx::available`]).
+///
+/// Every method is an always-inline wrapper of an AVX intrinsic, which executes only on a processor
+/// with AVX and inlines only into code compiled with it: so the type is used only inside
+/// `PreparedRay::dispatch_avx` (compiled with AVX, called after [`avx::available`]), where every
+/// value of it is made and used. The operations are the same IEEE operations lane by lane as
+/// [`F4`]'s (no fused multiply-add: the walks are compiled for AVX, not FMA), so eight lanes give
+/// the bits two calls of four give.
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+pub(crate) mod avx {
+    // The intrinsics need AVX, which the caller's context provides, not these wrappers': each call
+    // is `unsafe` under that one invariant (the type's docs).
+    #![allow(clippy::undocumented_unsafe_blocks)]
+
+    use core::arch::x86_64::*;
+    #[cfg(not(miri))]
+    use core::sync::atomic::{AtomicU8, Ordering};
+
+    use super::Lanes;
+
+    /// Whether this processor and its operating system run AVX instructions (CPUID's AVX and
+    /// OSXSAVE bits, and XCR0 enabling the SSE and AVX state), asked once and remembered. False
+    /// under Miri, which does not emulate CPUID.
+    #[inline(always)]
+    pub(crate) fn available() -> bool {
+        #[cfg(miri)]
+        {
+            false
+        }
+        #[cfg(not(miri))]
+        {
+            // 0 = not asked yet, 1 = no, 2 = yes. Relaxed: every thread computes the same answer.
+            static STATE: AtomicU8 = AtomicU8::new(0);
+            match STATE.load(Ordering::Relaxed) {
+                2 => true,
+                1 => false,
+                _ => {
+                    let yes = detect();
+                    STATE.store(if yes { 2 } else { 1 }, Ordering::Relaxed);
+                    yes
+                }
+            }
+        }
+    }
+
+    #[cfg(not(miri))]
+    #[cold]
+    fn detect() -> bool {
+        // SAFETY: CPUID exists on every x86-64 processor (`unsafe` in older compilers only).
+        #[allow(unused_unsafe)]
+        let leaf1 = unsafe { __cpuid(1) };
+        let (osxsave, avx) = (leaf1.ecx & (1 << 27) != 0, leaf1.ecx & (1 << 28) != 0);
+        if !(osxsave && avx) {
+            return false;
+        }
+        // SAFETY: OSXSAVE set means the OS enabled XGETBV.
+        let xcr0 = unsafe { xcr0() };
+        xcr0 & 0b110 == 0b110
+    }
+
+    #[cfg(not(miri))]
+    #[target_feature(enable = "xsave")]
+    unsafe fn xcr0() -> u64 {
+        _xgetbv(0)
+    }
+
+    /// Eight lanes (see the module docs for where a value may exist).
+    #[derive(Clone, Copy, Debug)]
+    pub(crate) struct Avx(__m256);
+
+    impl Avx {
+        /// Lanes 0..4 from `a`, 4..8 from `b`.
+        #[inline(always)]
+        pub(crate) fn load_pair(a: &[f32; 4], b: &[f32; 4]) -> Self {
+            // `a`, `b` are 16 readable bytes each; the unaligned loads need no alignment.
+            Avx(unsafe { _mm256_loadu2_m128(b.as_ptr(), a.as_ptr()) })
+        }
+    }
+
+    impl Lanes for Avx {
+        type Mask = __m256;
+        #[inline(always)]
+        fn splat(x: f32) -> Self {
+            Avx(unsafe { _mm256_set1_ps(x) })
+        }
+        /// The same four lanes twice.
+        #[inline(always)]
+        fn load(v: &[f32; 4]) -> Self {
+            Self::load_pair(v, v)
+        }
+        #[inline(always)]
+        fn add(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_add_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn sub(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_sub_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn mul(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_mul_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn div(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_div_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn max(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_max_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn min(self, o: Self) -> Self {
+            Avx(unsafe { _mm256_min_ps(self.0, o.0) })
+        }
+        #[inline(always)]
+        fn abs(self) -> Self {
+            let mask = unsafe { _mm256_castsi256_ps(_mm256_set1_epi32(0x7fff_ffff)) };
+            Avx(unsafe { _mm256_and_ps(self.0, mask) })
+        }
+        #[inline(always)]
+        fn neg(self) -> Self {
+            Avx(unsafe { _mm256_xor_ps(self.0, _mm256_set1_ps(-0.0)) })
+        }
+        #[inline(always)]
+        fn nle(self, o: Self) -> __m256 {
+            unsafe { _mm256_cmp_ps::<_CMP_NLE_UQ>(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn nge(self, o: Self) -> __m256 {
+            unsafe { _mm256_cmp_ps::<_CMP_NGE_UQ>(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn gt(self, o: Self) -> __m256 {
+            unsafe { _mm256_cmp_ps::<_CMP_GT_OQ>(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn lt(self, o: Self) -> __m256 {
+            unsafe { _mm256_cmp_ps::<_CMP_LT_OQ>(self.0, o.0) }
+        }
+        #[inline(always)]
+        fn and(a: __m256, b: __m256) -> __m256 {
+            unsafe { _mm256_and_ps(a, b) }
+        }
+        #[inline(always)]
+        fn bits(m: __m256) -> u32 {
+            unsafe { _mm256_movemask_ps(m) as u32 }
+        }
+    }
+}
+
 #[cfg(all(target_arch = "aarch64", target_feature = "neon"))]
 mod neon {
     // As for SSE2: safe under the target feature in newer compilers, `unsafe` in older ones.

@@ -115,6 +115,14 @@ pub(crate) trait TriangleTest: Copy {
     /// The lanes of `block` that [`TriangleTest::test`] might hit (bit `k` for lane `k`): every lane
     /// it would hit is set; most lanes it would miss are clear.
     fn survivors(&self, block: &Block4) -> u32;
+    /// Whether [`TriangleTest::survivors_pair`] filters two blocks in one pass (lists are then
+    /// tested two blocks at a time; otherwise one at a time, which keeps one filter per walk).
+    const PAIRS: bool = false;
+    /// [`TriangleTest::survivors`] of two blocks (bits 0..4 for `a`, 4..8 for `b`).
+    #[inline(always)]
+    fn survivors_pair(&self, a: &Block4, b: &Block4) -> u32 {
+        self.survivors(a) | self.survivors(b) << 4
+    }
     /// The same test with its axes chosen at run time.
     fn any_axes(&self) -> AnyKernel<'_>;
 }
@@ -175,6 +183,52 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for Kernel<'_, KZ, SWAP> {
         let ray = self.0;
         let lanes = filter::FilterRay::new::<KZ, SWAP>(ray);
         AnyKernel(ray, self.1, lanes)
+    }
+}
+
+/// A [`Kernel`] that filters two blocks at a time in eight AVX lanes (the same answer as two calls
+/// of [`Kernel::survivors`]); made only inside [`PreparedRay::dispatch_avx`], which is compiled with
+/// AVX and runs only where the processor has it.
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+#[derive(Clone, Copy)]
+pub(crate) struct KernelAvx<'a, const KZ: usize, const SWAP: bool>(
+    Kernel<'a, KZ, SWAP>,
+    filter::FilterRay<lanes::avx::Avx>,
+);
+
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+impl<const KZ: usize, const SWAP: bool> TriangleTest for KernelAvx<'_, KZ, SWAP> {
+    const PAIRS: bool = true;
+    #[inline(always)]
+    fn ray(&self) -> &PreparedRay {
+        self.0.ray()
+    }
+    #[inline(always)]
+    fn test(&self, tri: &[Vec3; 3]) -> Option<TriHit> {
+        self.0.test(tri)
+    }
+    #[inline(always)]
+    fn test_lane(&self, block: &Block4, lane: usize) -> Option<TriHit> {
+        self.0.test_lane(block, lane)
+    }
+    #[inline(always)]
+    fn accept(&self, prim: u32, hit: &TriHit) -> bool {
+        self.0.accept(prim, hit)
+    }
+    #[inline(always)]
+    fn survivors(&self, block: &Block4) -> u32 {
+        self.0.survivors(block)
+    }
+    #[inline(always)]
+    fn survivors_pair(&self, a: &Block4, b: &Block4) -> u32 {
+        if !self.0 .0.filter_ok {
+            return 0xff;
+        }
+        filter::survivors_pair::<KZ, SWAP>(&self.1, a, b)
+    }
+    #[inline(always)]
+    fn any_axes(&self) -> AnyKernel<'_> {
+        self.0.any_axes()
     }
 }
 
@@ -438,9 +492,49 @@ impl PreparedRay {
         accept: Option<&dyn Accept>,
         lp: L,
     ) -> L::Output {
+        #[cfg(all(target_arch = "x86_64", feature = "avx"))]
+        if lanes::avx::available() {
+            // SAFETY: the processor runs AVX (just asked).
+            return unsafe { self.dispatch_avx(accept, lp) };
+        }
+        self.dispatch_plain(accept, lp)
+    }
+
+    /// [`PreparedRay::dispatch_accepting`] with the four-lane kernels, whatever the processor (the
+    /// only path without the `avx` feature, on other architectures, or on a processor without AVX).
+    #[inline(always)]
+    pub(crate) fn dispatch_plain<L: TriangleLoop>(
+        &self,
+        accept: Option<&dyn Accept>,
+        lp: L,
+    ) -> L::Output {
         macro_rules! run {
             ($kz:expr, $swap:expr) => {
                 lp.run(Kernel::<$kz, $swap>::new(self, accept))
+            };
+        }
+        with_axes!(self, run)
+    }
+
+    /// [`PreparedRay::dispatch_accepting`] compiled with AVX: the whole walk is inlined here, so
+    /// its kernels ([`KernelAvx`]) filter blocks in pairs in eight lanes, and every other
+    /// operation is the one the plain walk performs (VEX-encoded, the same IEEE results).
+    ///
+    /// # Safety
+    /// The processor must run AVX ([`lanes::avx::available`]).
+    #[cfg(all(target_arch = "x86_64", feature = "avx"))]
+    #[target_feature(enable = "avx")]
+    unsafe fn dispatch_avx<L: TriangleLoop>(
+        &self,
+        accept: Option<&dyn Accept>,
+        lp: L,
+    ) -> L::Output {
+        macro_rules! run {
+            ($kz:expr, $swap:expr) => {
+                lp.run(KernelAvx::<$kz, $swap>(
+                    Kernel::<$kz, $swap>::new(self, accept),
+                    filter::FilterRay::new::<$kz, $swap>(self),
+                ))
             };
         }
         with_axes!(self, run)

@@ -228,6 +228,7 @@ fn hit_lanes(ray: &Ray, block: &Block4) -> u32 {
 #[test]
 fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
     let mut rng = SplitMix64::new(0xf1);
+    let mut pairs_checked = 0u32;
     for case in 0..100_000 {
         let (ray, tri) = pair(&mut rng, case);
         let mut block = Block4::default();
@@ -252,6 +253,26 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             filter_lanes::<Portable>(&r, &block),
         );
         assert_eq!(vector, plain, "vector and portable lanes differ: {ray:?}");
+        // Two blocks in eight lanes: the bits of the two four-lane calls (this block beside one of
+        // another scale, in both orders).
+        if let Some(pair_of) = avx_pair(&r) {
+            let mut other = Block4::default();
+            for lane in 0..4 {
+                other.set(lane, &pair(&mut rng, case + 16 + lane).1);
+            }
+            let other_alone = filter_lanes::<F4>(&r, &other);
+            assert_eq!(
+                pair_of(&block, &other),
+                vector | other_alone << 4,
+                "{ray:?}"
+            );
+            assert_eq!(
+                pair_of(&other, &block),
+                other_alone | vector << 4,
+                "{ray:?}"
+            );
+            pairs_checked += 1;
+        }
         let hits = hit_lanes(&ray, &block);
         assert_eq!(
             hits & !vector,
@@ -285,6 +306,65 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
         f64::from(rejected) > 0.95 * f64::from(misses),
         "rejected {rejected} of {misses} misses"
     );
+    // Where the processor runs AVX, the pairs were checked on most cases.
+    assert!(
+        !avx_pair_is_checked() || pairs_checked > 40_000,
+        "{pairs_checked}"
+    );
+}
+
+/// Whether this build and processor filter blocks in pairs (so the tests must check them).
+fn avx_pair_is_checked() -> bool {
+    #[cfg(all(target_arch = "x86_64", feature = "avx"))]
+    {
+        super::lanes::avx::available()
+    }
+    #[cfg(not(all(target_arch = "x86_64", feature = "avx")))]
+    {
+        false
+    }
+}
+
+/// The eight-lane filter of two blocks for `r`, through the kernel the AVX walks use, where this
+/// build and processor have it.
+#[allow(clippy::type_complexity)]
+fn avx_pair(r: &PreparedRay) -> Option<impl Fn(&Block4, &Block4) -> u32 + '_> {
+    #[cfg(all(target_arch = "x86_64", feature = "avx"))]
+    {
+        if !avx_pair_is_checked() {
+            return None;
+        }
+        /// # Safety
+        /// The processor runs AVX.
+        #[target_feature(enable = "avx")]
+        unsafe fn with_avx(r: &PreparedRay, a: &Block4, b: &Block4) -> u32 {
+            use super::{Kernel, KernelAvx, TriangleTest};
+            macro_rules! pair {
+                ($kz:expr, $swap:expr) => {
+                    KernelAvx::<$kz, $swap>(
+                        Kernel::<$kz, $swap>::new(r, None),
+                        filter::FilterRay::new::<$kz, $swap>(r),
+                    )
+                    .survivors_pair(a, b)
+                };
+            }
+            match r.axes {
+                0 => pair!(0, false),
+                1 => pair!(0, true),
+                2 => pair!(1, false),
+                3 => pair!(1, true),
+                4 => pair!(2, false),
+                _ => pair!(2, true),
+            }
+        }
+        // SAFETY: `avx_pair_is_checked` asked the processor.
+        Some(move |a: &Block4, b: &Block4| unsafe { with_avx(r, a, b) })
+    }
+    #[cfg(not(all(target_arch = "x86_64", feature = "avx")))]
+    {
+        let _ = r;
+        None::<fn(&Block4, &Block4) -> u32>
+    }
 }
 
 /// The float after `x` (`x` finite).
