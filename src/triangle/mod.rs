@@ -221,7 +221,8 @@ impl<const KZ: usize, const SWAP: bool> TriangleTest for KernelAvx<'_, KZ, SWAP>
     }
     #[inline(always)]
     fn survivors_pair(&self, a: &Block4, b: &Block4) -> u32 {
-        if !self.0 .0.filter_ok {
+        // As `Kernel::survivors`: every lane survives where the filter may not run.
+        if !self.ray().filter_ok {
             return 0xff;
         }
         filter::survivors_pair::<KZ, SWAP>(&self.1, a, b)

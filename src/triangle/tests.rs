@@ -348,14 +348,7 @@ fn avx_pair(r: &PreparedRay) -> Option<impl Fn(&Block4, &Block4) -> u32 + '_> {
                     .survivors_pair(a, b)
                 };
             }
-            match r.axes {
-                0 => pair!(0, false),
-                1 => pair!(0, true),
-                2 => pair!(1, false),
-                3 => pair!(1, true),
-                4 => pair!(2, false),
-                _ => pair!(2, true),
-            }
+            with_axes!(r, pair)
         }
         // SAFETY: `avx_pair_is_checked` asked the processor.
         Some(move |a: &Block4, b: &Block4| unsafe { with_avx(r, a, b) })
