@@ -733,3 +733,13 @@ fn the_filter_makes_no_subnormal_value_on_ordinary_scenes() {
     }
     assert!(checked > 19_000, "{checked}");
 }
+
+/// The run-time check that picks the AVX walks agrees with the standard library's.
+#[test]
+#[cfg(all(target_arch = "x86_64", feature = "avx", feature = "std", not(miri)))]
+fn avx_detection_agrees_with_std() {
+    assert_eq!(
+        super::lanes::avx::available(),
+        std::is_x86_feature_detected!("avx")
+    );
+}
