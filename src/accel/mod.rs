@@ -303,6 +303,9 @@ mod tests {
         }
         impl<const ANY: bool> TriangleLoop for List<'_, ANY> {
             type Output = Hit;
+            // Inline, as the walks' `run` is: so that the AVX path's lane operations are inlined
+            // into the function compiled with AVX (else they stay calls: slower, not wrong).
+            #[inline(always)]
             fn run<T: TriangleTest>(self, test: T) -> Hit {
                 let mut best = Hit::MISS;
                 let mut mailbox = Mailbox::new();

@@ -226,6 +226,17 @@ mod sse2 {
     #[derive(Clone, Copy, Debug)]
     pub(crate) struct Sse2(__m128);
 
+    #[cfg(test)]
+    impl Sse2 {
+        /// The four lanes' values.
+        pub(crate) fn to_array(self) -> [f32; 4] {
+            let mut out = [0.0; 4];
+            // SAFETY: `out` is 16 writable bytes; the unaligned store needs no alignment.
+            unsafe { _mm_storeu_ps(out.as_mut_ptr(), self.0) };
+            out
+        }
+    }
+
     impl Lanes for Sse2 {
         type Mask = __m128;
         #[inline(always)]
@@ -301,9 +312,10 @@ mod sse2 {
 /// feature; the processor is asked at run time, [`avx::available`]).
 ///
 /// Every method is an always-inline wrapper of an AVX intrinsic, which executes only on a processor
-/// with AVX and inlines only into code compiled with it: so the type is used only inside
-/// `PreparedRay::dispatch_avx` (compiled with AVX, called after [`avx::available`]), where every
-/// value of it is made and used. The operations are the same IEEE operations lane by lane as
+/// with AVX and inlines only into code compiled with it: so the type is used only in code reached
+/// from `PreparedRay::dispatch_avx` (compiled with AVX, called after [`avx::available`]) and from
+/// tests that asked the same (where a wrapper is not inlined, it calls the intrinsic: slower,
+/// still only after the check). The operations are the same IEEE operations lane by lane as
 /// [`F4`]'s (no fused multiply-add: the walks are compiled for AVX, not FMA), so eight lanes give
 /// the bits two calls of four give.
 #[cfg(all(target_arch = "x86_64", feature = "avx"))]
@@ -369,6 +381,15 @@ pub(crate) mod avx {
     pub(crate) struct Avx(__m256);
 
     impl Avx {
+        /// The eight lanes' values (tests; AVX code only, as every use of the type).
+        #[cfg(test)]
+        #[inline(always)]
+        pub(crate) fn to_array(self) -> [f32; 8] {
+            let mut out = [0.0; 8];
+            unsafe { _mm256_storeu_ps(out.as_mut_ptr(), self.0) };
+            out
+        }
+
         /// Lanes 0..4 from `a`, 4..8 from `b`.
         #[inline(always)]
         pub(crate) fn load_pair(a: &[f32; 4], b: &[f32; 4]) -> Self {

@@ -228,7 +228,6 @@ fn hit_lanes(ray: &Ray, block: &Block4) -> u32 {
 #[test]
 fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
     let mut rng = SplitMix64::new(0xf1);
-    let mut pairs_checked = 0u32;
     for case in 0..100_000 {
         let (ray, tri) = pair(&mut rng, case);
         let mut block = Block4::default();
@@ -253,26 +252,6 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
             filter_lanes::<Portable>(&r, &block),
         );
         assert_eq!(vector, plain, "vector and portable lanes differ: {ray:?}");
-        // Two blocks in eight lanes: the bits of the two four-lane calls (this block beside one of
-        // another scale, in both orders).
-        if let Some(pair_of) = avx_pair(&r) {
-            let mut other = Block4::default();
-            for lane in 0..4 {
-                other.set(lane, &pair(&mut rng, case + 16 + lane).1);
-            }
-            let other_alone = filter_lanes::<F4>(&r, &other);
-            assert_eq!(
-                pair_of(&block, &other),
-                vector | other_alone << 4,
-                "{ray:?}"
-            );
-            assert_eq!(
-                pair_of(&other, &block),
-                other_alone | vector << 4,
-                "{ray:?}"
-            );
-            pairs_checked += 1;
-        }
         let hits = hit_lanes(&ray, &block);
         assert_eq!(
             hits & !vector,
@@ -306,11 +285,161 @@ fn the_filter_never_rejects_a_hit_and_rejects_clear_misses() {
         f64::from(rejected) > 0.95 * f64::from(misses),
         "rejected {rejected} of {misses} misses"
     );
-    // Where the processor runs AVX, the pairs were checked on most cases.
+}
+
+/// Two blocks filtered in eight lanes keep exactly the lanes of two four-lane calls, on rays with
+/// windows (so that the window check runs in eight lanes too) and blocks of different scales side
+/// by side, the scene being the box around both (as every structure's is).
+#[test]
+fn two_blocks_in_eight_lanes_filter_as_two_calls() {
+    if !avx_pair_is_checked() {
+        return;
+    }
+    let mut rng = SplitMix64::new(0x8a1e5);
+    let ends = [
+        f32::NEG_INFINITY,
+        -1.0,
+        0.0,
+        1e-4,
+        0.3,
+        0.9,
+        1.0,
+        1.1,
+        3.0,
+        f32::INFINITY,
+    ];
+    let (mut checked, mut windowed, mut kept) = (0u32, 0u32, 0u32);
+    for case in 0..100_000 {
+        let (ray, tri) = pair(&mut rng, case);
+        let (mut a, mut b) = (Block4::default(), Block4::default());
+        a.set(0, &tri);
+        for lane in 1..4 {
+            a.set(lane, &pair(&mut rng, case + lane).1);
+        }
+        // The other block: 0 to 4 triangles (unused lanes are NaN) of other scales.
+        for lane in 0..rng.below(5) {
+            let other = case + 1 + rng.below(7);
+            b.set(lane, &pair(&mut rng, other).1);
+        }
+        let (t0, t1) = (ends[rng.below(ends.len())], ends[rng.below(ends.len())]);
+        let ray = Ray::segment(ray.org, ray.dir, t0.min(t1), t0.max(t1));
+        let Some(r) = PreparedRay::new(&ray) else {
+            continue;
+        };
+        let scale = [&a, &b]
+            .iter()
+            .flat_map(|block| (0..4).flat_map(|k| block.get(k)))
+            .filter(|p| p.is_finite())
+            .fold(0.0f32, |m, p| m.max(p.abs().max_element()));
+        let r = r.for_scene(scale);
+        let Some(pair_of) = avx_pair(&r).filter(|_| r.filter_ok) else {
+            continue;
+        };
+        let (fa, fb) = (filter_lanes::<F4>(&r, &a), filter_lanes::<F4>(&r, &b));
+        assert_eq!(pair_of(&a, &b), fa | fb << 4, "{ray:?} {a:?} {b:?}");
+        assert_eq!(pair_of(&b, &a), fb | fa << 4, "{ray:?} {a:?} {b:?}");
+        checked += 1;
+        windowed += u32::from(!(ray.tmin <= 0.0 && ray.tmax == f32::INFINITY));
+        kept += (fa | fb << 4).count_ones();
+    }
+    // Most cases ran, most of them with the window check, and the filter kept lanes in some.
     assert!(
-        !avx_pair_is_checked() || pairs_checked > 40_000,
-        "{pairs_checked}"
+        checked > 30_000 && windowed > 25_000 && kept > 20_000,
+        "{checked} {windowed} {kept}"
     );
+}
+
+/// Each operation of the eight AVX lanes gives, lane for lane, the bits of two calls of the
+/// four-lane one, on values of every kind (zeros of both signs, subnormals, infinities, NaN).
+#[test]
+fn eight_lanes_do_what_two_four_lane_calls_do() {
+    #[cfg(all(target_arch = "x86_64", feature = "avx"))]
+    {
+        use super::lanes::avx::Avx;
+        if !avx_pair_is_checked() {
+            return;
+        }
+        /// The eight-lane results and the two four-lane calls' of every operation, as bits.
+        /// # Safety
+        /// The processor runs AVX.
+        #[target_feature(enable = "avx")]
+        unsafe fn both(a: [f32; 8], b: [f32; 8]) -> ([[u32; 8]; 12], [[u32; 8]; 12]) {
+            let half =
+                |x: &[f32; 8], h: usize| [x[4 * h], x[4 * h + 1], x[4 * h + 2], x[4 * h + 3]];
+            let (va, vb) = (
+                Avx::load_pair(&half(&a, 0), &half(&a, 1)),
+                Avx::load_pair(&half(&b, 0), &half(&b, 1)),
+            );
+            let eight = |v: Avx| v.to_array().map(f32::to_bits);
+            let mask = |m: u32| core::array::from_fn(|k| (m >> k) & 1);
+            let wide = [
+                eight(va.add(vb)),
+                eight(va.sub(vb)),
+                eight(va.mul(vb)),
+                eight(va.div(vb)),
+                eight(va.max(vb)),
+                eight(va.min(vb)),
+                eight(va.abs()),
+                eight(va.neg()),
+                mask(Avx::bits(va.nle(vb))),
+                mask(Avx::bits(va.nge(vb))),
+                mask(Avx::bits(va.gt(vb))),
+                mask(Avx::bits(va.lt(vb))),
+            ];
+            let four = |h: usize| -> [[u32; 4]; 12] {
+                let (x, y) = (F4::load(&half(&a, h)), F4::load(&half(&b, h)));
+                let bits = |v: F4| v.to_array().map(f32::to_bits);
+                let mask = |m: u32| core::array::from_fn(|k| (m >> k) & 1);
+                [
+                    bits(x.add(y)),
+                    bits(x.sub(y)),
+                    bits(x.mul(y)),
+                    bits(x.div(y)),
+                    bits(x.max(y)),
+                    bits(x.min(y)),
+                    bits(x.abs()),
+                    bits(x.neg()),
+                    mask(F4::bits(x.nle(y))),
+                    mask(F4::bits(x.nge(y))),
+                    mask(F4::bits(x.gt(y))),
+                    mask(F4::bits(x.lt(y))),
+                ]
+            };
+            let (lo, hi) = (four(0), four(1));
+            let two = core::array::from_fn(|op| {
+                core::array::from_fn(|k| if k < 4 { lo[op][k] } else { hi[op][k - 4] })
+            });
+            (wide, two)
+        }
+        let special = [
+            0.0f32,
+            -0.0,
+            1.0,
+            -1.5,
+            1e-45,
+            -3e-39,
+            f32::MAX,
+            f32::INFINITY,
+            f32::NEG_INFINITY,
+            f32::NAN,
+            f32::from_bits(0xffc0_0001),
+        ];
+        let mut rng = SplitMix64::new(0xa1a5);
+        for _ in 0..50_000 {
+            let mut value = || {
+                if rng.below(2) == 0 {
+                    special[rng.below(special.len())]
+                } else {
+                    f32::from_bits(rng.next_u64() as u32)
+                }
+            };
+            let a: [f32; 8] = core::array::from_fn(|_| value());
+            let b: [f32; 8] = core::array::from_fn(|_| value());
+            // SAFETY: `avx_pair_is_checked` asked the processor.
+            let (wide, two) = unsafe { both(a, b) };
+            assert_eq!(wide, two, "{a:?} {b:?}");
+        }
+    }
 }
 
 /// Whether this build and processor filter blocks in pairs (so the tests must check them).
