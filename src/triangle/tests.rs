@@ -349,6 +349,38 @@ fn two_blocks_in_eight_lanes_filter_as_two_calls() {
     );
 }
 
+/// Every lane operation the filter uses on `x` and `y`, each result as its lanes' bits (`values`
+/// reads the lanes; comparisons as one 0/1 per lane, of `lanes`).
+#[cfg(all(target_arch = "x86_64", feature = "avx"))]
+#[inline(always)]
+fn every_operation<L: Lanes>(
+    x: L,
+    y: L,
+    values: impl Fn(L) -> Vec<f32>,
+    lanes: u32,
+) -> Vec<Vec<u32>> {
+    let bits = |v: L| values(v).iter().map(|f| f.to_bits()).collect::<Vec<u32>>();
+    let mask = |m: L::Mask| {
+        (0..lanes)
+            .map(|k| (L::bits(m) >> k) & 1)
+            .collect::<Vec<u32>>()
+    };
+    alloc::vec![
+        bits(x.add(y)),
+        bits(x.sub(y)),
+        bits(x.mul(y)),
+        bits(x.div(y)),
+        bits(x.max(y)),
+        bits(x.min(y)),
+        bits(x.abs()),
+        bits(x.neg()),
+        mask(x.nle(y)),
+        mask(x.nge(y)),
+        mask(x.gt(y)),
+        mask(x.lt(y)),
+    ]
+}
+
 /// Each operation of the eight AVX lanes gives, lane for lane, the bits of two calls of the
 /// four-lane one, on values of every kind (zeros of both signs, subnormals, infinities, NaN).
 #[test]
@@ -363,53 +395,21 @@ fn eight_lanes_do_what_two_four_lane_calls_do() {
         /// # Safety
         /// The processor runs AVX.
         #[target_feature(enable = "avx")]
-        unsafe fn both(a: [f32; 8], b: [f32; 8]) -> ([[u32; 8]; 12], [[u32; 8]; 12]) {
+        unsafe fn both(a: [f32; 8], b: [f32; 8]) -> (Vec<Vec<u32>>, Vec<Vec<u32>>) {
             let half =
                 |x: &[f32; 8], h: usize| [x[4 * h], x[4 * h + 1], x[4 * h + 2], x[4 * h + 3]];
             let (va, vb) = (
                 Avx::load_pair(&half(&a, 0), &half(&a, 1)),
                 Avx::load_pair(&half(&b, 0), &half(&b, 1)),
             );
-            let eight = |v: Avx| v.to_array().map(f32::to_bits);
-            let mask = |m: u32| core::array::from_fn(|k| (m >> k) & 1);
-            let wide = [
-                eight(va.add(vb)),
-                eight(va.sub(vb)),
-                eight(va.mul(vb)),
-                eight(va.div(vb)),
-                eight(va.max(vb)),
-                eight(va.min(vb)),
-                eight(va.abs()),
-                eight(va.neg()),
-                mask(Avx::bits(va.nle(vb))),
-                mask(Avx::bits(va.nge(vb))),
-                mask(Avx::bits(va.gt(vb))),
-                mask(Avx::bits(va.lt(vb))),
-            ];
-            let four = |h: usize| -> [[u32; 4]; 12] {
+            let eight = every_operation(va, vb, |v: Avx| v.to_array().to_vec(), 8);
+            let four = |h: usize| {
                 let (x, y) = (F4::load(&half(&a, h)), F4::load(&half(&b, h)));
-                let bits = |v: F4| v.to_array().map(f32::to_bits);
-                let mask = |m: u32| core::array::from_fn(|k| (m >> k) & 1);
-                [
-                    bits(x.add(y)),
-                    bits(x.sub(y)),
-                    bits(x.mul(y)),
-                    bits(x.div(y)),
-                    bits(x.max(y)),
-                    bits(x.min(y)),
-                    bits(x.abs()),
-                    bits(x.neg()),
-                    mask(F4::bits(x.nle(y))),
-                    mask(F4::bits(x.nge(y))),
-                    mask(F4::bits(x.gt(y))),
-                    mask(F4::bits(x.lt(y))),
-                ]
+                every_operation(x, y, |v: F4| v.to_array().to_vec(), 4)
             };
             let (lo, hi) = (four(0), four(1));
-            let two = core::array::from_fn(|op| {
-                core::array::from_fn(|k| if k < 4 { lo[op][k] } else { hi[op][k - 4] })
-            });
-            (wide, two)
+            let two = lo.iter().zip(&hi).map(|(l, h)| [&l[..], &h[..]].concat());
+            (eight, two.collect())
         }
         let special = [
             0.0f32,
