@@ -43,12 +43,14 @@ pub struct GridParams {
 }
 
 impl GridParams {
-    /// The default: λ = 1/2 with exact overlap. With the four-wide list test a cell's triangles
-    /// cost less than the cells a ray steps through, so fewer, fuller cells win: over the 32
-    /// scenes of the evaluation and the failure-mode set, λ = 1/2 traced 12 % faster than λ = 2
-    /// (geometric mean; 1/4: 9 %, 1: 9 %) and built 1.7× faster (docs/performance.md).
+    /// The default: λ = 0.35 with exact overlap. With the list test a cell's triangles cost less
+    /// than the cells a ray steps through, so fewer, fuller cells win: over the 32 scenes of the
+    /// evaluation and the failure-mode set, λ = 1/2 traced 12 % faster than λ = 2 (geometric mean;
+    /// 1/4: 9 %, 1: 9 %) and built 1.7× faster (stop 19); once the AVX filter tested two blocks at
+    /// a time (stop 33), λ = 0.35 built in 0.93× the time of 1/2 (mesh copy included) with the same
+    /// time per ray within ±1 % (29 scenes, five alternated runs; docs/performance.md, "Stop 34").
     pub const DEFAULT: GridParams = GridParams {
-        density: 0.5,
+        density: 0.35,
         exact_overlap: true,
         layout: TriangleLayout::Packed,
     };
