@@ -80,8 +80,8 @@ pub enum rq_kd_quality {
     /// The library's tree (`KdTreeParams::DEFAULT`): binned SAH, costs chosen by time.
     RQ_KD_QUALITY_DEFAULT = 0,
     /// A faster build for few rays (`KdTreeParams::FAST`: tests priced at half the default's, so
-    /// shallower trees with bigger leaves: about 0.75× the build for about 2 % slower rays;
-    /// docs/performance.md, "Stop 25").
+    /// shallower trees with bigger leaves: about 0.78× the build for about 2–3 % slower rays;
+    /// docs/performance.md, "Stop 34").
     RQ_KD_QUALITY_FAST = 1,
     /// The exact SAH sweep up to 1 024 triangles a node (`KdTreeParams::HIGH`): about 2.7× the
     /// build for about 2 % faster rays, so only for very long runs (docs/performance.md, "Stop 25").

@@ -50,8 +50,13 @@ pub struct KdTreeParams {
 }
 
 impl KdTreeParams {
-    /// The default: a block test priced at half a node step (`C_t = 1`, `C_i = 0.5` per block of
-    /// four) and empty-space bonus 0.125 (stop 25: against 0.5, 0.94× the time per ray in the
+    /// The default: a block test priced at 0.35 of a node step (`C_t = 1`, `C_i = 0.35` per block
+    /// of four; 0.5 until stop 34: once the AVX filter tested lists two blocks at a time (stop 33),
+    /// bigger leaves cost less, and over the evaluation's 29 scenes below a million triangles
+    /// `C_i = 0.35` built in 0.87× the time of 0.5 with the same time per ray (0.989–0.994 in the
+    /// geometric mean, six alternated runs; tetra-10k 1.01–1.03, hair-50k 0.95);
+    /// docs/performance.md, "Stop 34") and empty-space bonus 0.125 (stop 25: against 0.5, 0.94×
+    /// the time per ray in the
     /// geometric mean over 29 scenes in two runs, 0.80–1.02× per scene, the build unchanged;
     /// a node step costs about ten triangle tests in time, so fewer cuts of empty space pay;
     /// docs/performance.md, "Stop 25"); min-max binning at every node (stop 20: against the exact
@@ -63,12 +68,12 @@ impl KdTreeParams {
     /// leaves unused on well-shaped scenes. The costs were chosen by time, not by instructions: a
     /// node step costs more than its ~33 instructions (the nodes of a deep tree miss the cache),
     /// and over the evaluation's scenes (29, one thread, timed per ray and per build against
-    /// `C_i = 1`, bonus 0.8, in two runs at stop 19, with bonus 0.5) this setting traced 4–5 % faster and built 16–17 %
+    /// `C_i = 1`, bonus 0.8, in two runs at stop 19, with bonus 0.5) `C_i = 0.5` traced 4–5 % faster and built 16–17 %
     /// faster (geometric means; hair 1.7× faster per ray, soup 1.18×; a few small scenes up to
     /// 9 % slower); docs/performance.md, "kd-tree costs by time".
     pub const DEFAULT: KdTreeParams = KdTreeParams {
         traversal_cost: 1.0,
-        intersection_cost: 0.5,
+        intersection_cost: 0.35,
         empty_bonus: 0.125,
         max_depth: 0,
         max_leaf_prims: 1,
@@ -77,13 +82,12 @@ impl KdTreeParams {
         layout: TriangleLayout::Packed,
     };
 
-    /// A faster build for few rays: tests priced at a quarter of a node step, so shallower trees
-    /// with bigger leaves (stop 25, against the default on 29 scenes: 0.75× its build time (0.64–0.81),
-    /// 1.7–2.3 % slower per ray in the geometric mean (two runs), up to 12 % on the Sierpinski
-    /// tetrahedra; at
-    /// stop 19, with the exact split up to 16 triangles and bonus 0.5: 0.75× and 4.7 %).
+    /// A faster build for few rays: tests priced at half the default's (`C_i = 0.175`), so
+    /// shallower trees with bigger leaves (stop 34, against the default on 14 scenes: 0.78× its
+    /// build time, 2–3 % slower per ray in the geometric mean, up to 7 % on sibenik and the
+    /// Sierpinski tetrahedra; at stop 25, `C_i` 0.25 against 0.5: 0.75× and 1.7–2.3 %).
     pub const FAST: KdTreeParams = KdTreeParams {
-        intersection_cost: 0.25,
+        intersection_cost: 0.175,
         ..KdTreeParams::DEFAULT
     };
 
