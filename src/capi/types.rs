@@ -84,7 +84,7 @@ pub enum rq_kd_quality {
     /// docs/performance.md, "Stop 34").
     RQ_KD_QUALITY_FAST = 1,
     /// The exact SAH sweep up to 1 024 triangles a node (`KdTreeParams::HIGH`): about 2.7× the
-    /// build for about 2 % faster rays, so only for very long runs (docs/performance.md, "Stop 25").
+    /// build for 2–4 % faster rays, so only for very long runs (docs/performance.md, "Stop 34").
     RQ_KD_QUALITY_HIGH = 2,
 }
 
