@@ -17,7 +17,7 @@ pub mod node;
 mod traverse;
 
 use node::KdNode;
-use traverse::Walk;
+use traverse::{Clip, Walk};
 
 /// The deepest tree the builder makes; the traversal stack has room for it.
 pub const MAX_DEPTH: u32 = 60;
@@ -303,6 +303,9 @@ impl KdTree {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
+        let Some(clip) = Clip::new(ray, &self.bounds) else {
+            return Hit::MISS;
+        };
         run_query(
             mesh,
             self.bounds,
@@ -312,6 +315,7 @@ impl KdTree {
                 tree: self,
                 mesh,
                 work,
+                clip,
             },
         )
     }
@@ -332,25 +336,34 @@ impl RayQuery for KdTree {
 }
 
 impl AcceptingQuery for KdTree {
-    // Out of line, so plain queries share this one copy of the walks.
+    // Out of line, so plain queries share this one copy of the walks. The box first: a ray that
+    // misses it is not prepared for the triangle test.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
+        let Some(clip) = Clip::new(ray, &self.bounds) else {
+            return Hit::MISS;
+        };
         let work = &mut KdWork::default();
         let walk = Walk::<false, false> {
             tree: self,
             mesh,
             work,
+            clip,
         };
         run_query(mesh, self.bounds, ray, accept, walk)
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
+        let Some(clip) = Clip::new(ray, &self.bounds) else {
+            return false;
+        };
         let work = &mut KdWork::default();
         let walk = Walk::<false, true> {
             tree: self,
             mesh,
             work,
+            clip,
         };
         run_query(mesh, self.bounds, ray, accept, walk).is_hit()
     }

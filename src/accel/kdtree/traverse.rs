@@ -17,7 +17,7 @@ use super::node::{EMPTY_ABOVE, EMPTY_BELOW};
 use super::{KdTree, KdWork, MAX_DEPTH};
 use crate::accel::{test_refs, Mailbox, Refs};
 use crate::mesh::TriMesh;
-use crate::ray::Hit;
+use crate::ray::{Aabb, Hit, Ray};
 use crate::triangle::{TriangleLoop, TriangleTest};
 
 /// Room for one pending far child per level of the deepest tree.
@@ -64,45 +64,45 @@ struct Pending {
     t1: f32,
 }
 
-/// One query's walk. `COUNT` counts the work; `ANY` stops at the first hit.
-pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
-    pub tree: &'a KdTree,
-    pub mesh: &'a TriMesh,
-    pub work: &'a mut KdWork,
+/// A ray's interval inside the tree's box and its per-axis constants: what the walk needs before
+/// its first node, made before the triangle test's per-ray constants are, so that a ray that misses
+/// the box pays for nothing else.
+#[derive(Clone, Copy)]
+pub(super) struct Clip {
+    axes: [AxisRay; 4],
+    t0: f32,
+    t1: f32,
 }
 
-impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
-    type Output = Hit;
-
+impl Clip {
+    /// The clip of `ray` to `bounds` (the tree's box), or `None` when the ray misses it (or the
+    /// box is empty). A ray the triangle test refuses (a NaN or infinite component) may get either;
+    /// the query refuses it after.
+    ///
+    /// Per axis: the origin, `1/d` scaled down and up by the slack, whether the ray runs downwards
+    /// (its near child is the upper one) and the node bits that flag its near and far child as
+    /// empty. `1/d` is `±∞` for a zero component, which makes every split `t` on that axis `±∞`
+    /// (the ray never crosses the plane: the near child holds the origin when `t` is `+∞`, the far
+    /// one when `−∞`) or NaN when the origin is on the plane (both children: the ray lies in the
+    /// plane, which both closed boxes hold). A component whose inverse overflows, or underflows
+    /// (so its relative error is unbounded), gets NaN: no constraint on that axis, every split
+    /// visits both sides. An array of four, indexed by the node's 2-bit axis, needs no checks.
     #[inline(always)]
-    fn run<T: TriangleTest>(self, test: T) -> Hit {
-        let Walk { tree, mesh, work } = self;
-        let r = test.ray();
-        let mut best = Hit::MISS;
-        let mut mailbox = Mailbox::new();
-        if tree.bounds.is_empty() {
-            return best;
+    pub(super) fn new(ray: &Ray, bounds: &Aabb) -> Option<Clip> {
+        if bounds.is_empty() {
+            return None;
         }
-        // Per ray, per axis: the origin, `1/d` scaled down and up by the slack, whether the ray
-        // runs downwards (its near child is the upper one) and the node bits that flag its near and
-        // far child as empty. `1/d` is `±∞` for a zero component, which makes every split `t` on
-        // that axis `±∞` (the ray never crosses the plane: the near child holds the origin when `t`
-        // is `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children:
-        // the ray lies in the plane, which both closed boxes hold). A component whose inverse
-        // overflows, or underflows (so its relative error is unbounded), gets NaN: no constraint on
-        // that axis, every split visits both sides. An array of four, indexed by the node's 2-bit
-        // axis, needs no checks.
-        let (o, d) = (r.org, r.dir);
+        let (o, d) = (ray.org, ray.dir);
         let mut axes = [AxisRay::default(); 4];
-        let (mut t0, mut t1) = (r.tmin, r.tmax);
-        let (lo, hi) = (tree.bounds.min, tree.bounds.max);
+        let (mut t0, mut t1) = (ray.tmin, ray.tmax);
+        let (lo, hi) = (bounds.min, bounds.max);
         for a in 0..3 {
             let down = u32::from(d[a].is_sign_negative());
             let mut inv = 1.0 / d[a];
             if d[a] == 0.0 {
                 // The box is the triangles' exact bounds: a ray outside its slab misses them all.
                 if o[a] < lo[a] || o[a] > hi[a] {
-                    return best;
+                    return None;
                 }
             } else if !(inv.is_finite() && inv.abs() >= f32::MIN_POSITIVE) {
                 inv = f32::NAN;
@@ -124,8 +124,39 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             };
         }
         if !(t0 <= t1) {
-            return best;
+            return None;
         }
+        Some(Clip { axes, t0, t1 })
+    }
+}
+
+/// One query's walk of a ray already clipped to the tree's box (`clip`, from the same ray). `COUNT`
+/// counts the work; `ANY` stops at the first hit.
+pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
+    pub tree: &'a KdTree,
+    pub mesh: &'a TriMesh,
+    pub work: &'a mut KdWork,
+    pub clip: Clip,
+}
+
+impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
+    type Output = Hit;
+
+    #[inline(always)]
+    fn run<T: TriangleTest>(self, test: T) -> Hit {
+        let Walk {
+            tree,
+            mesh,
+            work,
+            clip,
+        } = self;
+        let mut best = Hit::MISS;
+        let mut mailbox = Mailbox::new();
+        let Clip {
+            axes,
+            mut t0,
+            mut t1,
+        } = clip;
         let nodes = &tree.nodes[..];
         // Entries are written before they are read (`sp` counts the written ones), so the array
         // needs no initialisation.
