@@ -27,7 +27,7 @@ use blocks::Blocks;
 use build::Members;
 use layout::Shape;
 use nested::Nested;
-use walk::Walk;
+use walk::{Plan, Walk};
 
 /// The grid's knobs.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -294,6 +294,10 @@ impl UniformGrid {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
+        let plan = Plan::of(self, ray);
+        if let Plan::Miss = plan {
+            return Hit::MISS;
+        }
         run_query(
             mesh,
             self.shape.bounds,
@@ -303,6 +307,7 @@ impl UniformGrid {
                 grid: self,
                 mesh,
                 work,
+                plan,
             },
         )
     }
@@ -389,25 +394,36 @@ impl RayQuery for UniformGrid {
 }
 
 impl AcceptingQuery for UniformGrid {
-    // Out of line, so plain queries share this one copy of the walks.
+    // Out of line, so plain queries share this one copy of the walks. The box first: a ray that
+    // misses it is not prepared for the triangle test.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
+        let plan = Plan::of(self, ray);
+        if let Plan::Miss = plan {
+            return Hit::MISS;
+        }
         let work = &mut GridWork::default();
         let walk = Walk::<false, false> {
             grid: self,
             mesh,
             work,
+            plan,
         };
         run_query(mesh, self.shape.bounds, ray, accept, walk)
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
+        let plan = Plan::of(self, ray);
+        if let Plan::Miss = plan {
+            return false;
+        }
         let work = &mut GridWork::default();
         let walk = Walk::<false, true> {
             grid: self,
             mesh,
             work,
+            plan,
         };
         run_query(mesh, self.shape.bounds, ray, accept, walk).is_hit()
     }

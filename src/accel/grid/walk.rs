@@ -12,14 +12,16 @@ use super::{GridWork, UniformGrid};
 use crate::accel::brute::test_all;
 use crate::accel::{test_blocks, Mailbox};
 use crate::mesh::TriMesh;
-use crate::ray::Hit;
+use crate::ray::{Hit, Ray};
 use crate::triangle::{AnyKernel, PreparedRay, TriangleLoop, TriangleTest};
 
-/// One query's walk. `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
+/// One query's walk of the line `plan` (from [`Plan::of`] on the same ray, before it was prepared
+/// for the triangle test). `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
 pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
     pub grid: &'a UniformGrid,
     pub mesh: &'a TriMesh,
     pub work: &'a mut GridWork,
+    pub plan: Plan,
 }
 
 /// Origins farther than this many of the smallest cells from the grid are walked by testing every
@@ -32,7 +34,8 @@ const SUBNORMAL_T_ERROR: f64 = 2.242_077_542_919_707_3e-44;
 
 /// The line a ray is walked on, its window, and whether the walk may stop at the first cell
 /// whose exit lies beyond the best hit.
-struct Line {
+#[derive(Clone, Copy)]
+pub(super) struct Line {
     org: Vec3,
     dir: Vec3,
     inv: Vec3,
@@ -42,7 +45,8 @@ struct Line {
 }
 
 /// How a ray is answered.
-enum Plan {
+#[derive(Clone, Copy)]
+pub(super) enum Plan {
     /// It misses the grid's box.
     Miss,
     /// Its origin is too far for any walk: every triangle is tested.
@@ -51,8 +55,24 @@ enum Plan {
     Walk(Line),
 }
 
+impl Plan {
+    /// How `grid` answers `ray`: [`Plan::Miss`] when the grid is empty or the ray misses its box,
+    /// else [`Line::of`]. Made from the ray before it is prepared for the triangle test, so that a
+    /// ray that misses the box pays for nothing else; a ray the test refuses (a NaN or infinite
+    /// component) may get any plan (every value is a float operation: nothing can panic), and the
+    /// query refuses it after.
+    #[inline(always)]
+    pub(super) fn of(grid: &UniformGrid, ray: &Ray) -> Plan {
+        if grid.offsets.is_empty() {
+            return Plan::Miss;
+        }
+        Line::of(grid, ray.org, ray.dir, ray.tmin, ray.tmax)
+    }
+}
+
 impl Line {
-    /// The line to walk for `r` through `grid` (non-empty), clipped to the box.
+    /// The line to walk for the ray `org + t·dir`, `t` in `[tmin, tmax]`, through `grid`
+    /// (non-empty), clipped to the box.
     ///
     /// Four lanes at a time (the fourth unused): every value is the one the scalar arithmetic
     /// gives (the same IEEE operations per lane), and none can be NaN where `min`/`max` meet it —
@@ -60,10 +80,10 @@ impl Line {
     /// difference is never NaN, and the lanes of a non-finite inverse are replaced before they
     /// are compared — so the SSE `min`/`max`, which do not handle NaN, give the same answers.
     #[inline(always)]
-    fn of(grid: &UniformGrid, r: &PreparedRay) -> Plan {
+    fn of(grid: &UniformGrid, org: Vec3, dir: Vec3, tmin: f32, tmax: f32) -> Plan {
         let shape = &grid.shape;
-        let (mut o, mut d) = (r.org, r.dir);
-        let (mut t0, mut t1) = (r.tmin, r.tmax);
+        let (mut o, mut d) = (org, dir);
+        let (mut t0, mut t1) = (tmin, tmax);
         let (lo, hi) = (Vec3A::from(shape.bounds.min), Vec3A::from(shape.bounds.max));
         let mut early_exit = true;
         // An origin farther than the margin covers: walk the same line from where it enters the
@@ -337,11 +357,13 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
 
     #[inline(always)]
     fn run<T: TriangleTest>(self, test: T) -> Hit {
-        let Walk { grid, mesh, work } = self;
+        let Walk {
+            grid,
+            mesh,
+            work,
+            plan,
+        } = self;
         let mut best = Hit::MISS;
-        if grid.offsets.is_empty() {
-            return best;
-        }
         // The work before this query, for a start over in the nested walk.
         let counted_before = *work;
         let mut axes = Axes::none();
@@ -350,7 +372,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             mut block,
             mut t_stop,
             no_exit,
-        } = match axes.start(grid, test.ray(), best.t, work, COUNT) {
+        } = match axes.start_on(grid, plan, best.t, work, COUNT) {
             Start::Walk(at) => at,
             Start::Nothing => return best,
             Start::TooFar => return test_all::<T, ANY>(&test, mesh),
@@ -572,8 +594,22 @@ impl Axes {
         work: &mut GridWork,
         count: bool,
     ) -> Start {
+        let plan = Line::of(grid, r.org, r.dir, r.tmin, r.tmax);
+        self.start_on(grid, plan, limit, work, count)
+    }
+
+    /// [`Axes::start`] on the line `plan` (made from the same ray).
+    #[inline(always)]
+    fn start_on(
+        &mut self,
+        grid: &UniformGrid,
+        plan: Plan,
+        limit: f32,
+        work: &mut GridWork,
+        count: bool,
+    ) -> Start {
         let axes = self;
-        let line = match Line::of(grid, r) {
+        let line = match plan {
             Plan::Walk(line) => line,
             Plan::Miss => return Start::Nothing,
             Plan::TestAll => return Start::TooFar,
