@@ -57,8 +57,9 @@ static rq_build_options options(rq_structure structure, uint64_t expected_rays, 
 
 /* A calibration whose estimates always favour the kd-tree (the grid costs 1 µs a ray, the kd-tree 1 ns
  * and almost nothing to build) and whose check prices grid cells far above triangle tests (the
- * check prices a kd-tree node at a twentieth of a cell, so the kd-tree passes wherever it visits
- * fewer than twenty nodes a cell). Free with rq_calibration_free. */
+ * check prices a kd-tree node at a twentieth of a cell, so the kd-tree passes on the Sierpinski
+ * tetrahedron: 13 nodes and 36 tests a sample ray against the grid's 7 cells and 50 tests). Free
+ * with rq_calibration_free. */
 static rq_calibration *calibration_favouring_the_kd_tree(void) {
   static const double values[8] = {10.0, 1000.0, 100.0, 1.0, 0.001, 1.0, 0.0, 1.0};
   return test_calibration(values);

@@ -126,17 +126,18 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// and 1.04; the kd-tree 24.8, 90.1, 2.59 and 1.63), kept through stops 28–33 because refits
 /// (stop 28 on the Intel VM, stop 31 on this one) changed no decision for the better within one
 /// run's noise. This one does: a cell now costs 18.3 tests instead of 13.2, and the check after a
-/// kd-tree build
-/// (`decision::kd_tree_confirmed`, whose verdict depends on the calibration through that ratio)
-/// keeps stadium-1M's kd-tree, which it used to drop although it is 1.5–1.9× faster per ray here
+/// kd-tree build (`decision::kd_tree_confirmed`, whose verdict depends on the calibration through
+/// that ratio) keeps stadium-1M's kd-tree, which it used to drop although it is 1.5–1.9× faster
+/// per ray here
 /// (the grid's 207 MB miss the cache, which its counted work does not show). Evaluation runs
 /// (docs/performance.md, "Stop 34"): the check kept the faster structure on 24–29 of 31 scenes
 /// with a loss of 0.17–0.54 in five runs with these values, against 26 and 1.20 in one with the
 /// old; the worst regret 1.39–1.78 (the estimates' errors on tetra-10k and stadium-1M) against
 /// 1.90 (the check dropping stadium-1M's kd-tree); the interior camera at 4 occlusion rays a hit
-/// 1.010–1.147 against 1.059 (this case's spread between runs is larger than the change). Since stop 27 a switch the tapped rays ask for waits for a second
-/// batch to ask too (issue 14's interior case: the tapped primary rays overstate the kd-tree's
-/// saving on the occlusion rays after them).
+/// 1.010–1.147 against 1.059 (this case's spread between runs is larger than the change). Since
+/// stop 27 a switch the tapped rays ask for waits for a second batch to ask too (issue 14's
+/// interior case: the tapped primary rays overstate the kd-tree's saving on the occlusion rays
+/// after them).
 /// `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
 /// since stop 20). The kd-tree's build is one term per N·log2 N (the median over the

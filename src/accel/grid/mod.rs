@@ -5,7 +5,7 @@
 use alloc::vec::Vec;
 
 use crate::accel::{
-    run_query, test_blocks, test_refs, Aabb, AcceptingQuery, Mailbox, RayQuery, Refs,
+    run_clipped_query, test_blocks, test_refs, Aabb, AcceptingQuery, Mailbox, RayQuery, Refs,
 };
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
@@ -294,22 +294,14 @@ impl UniformGrid {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
-        let plan = Plan::of(self, ray);
-        if let Plan::Miss = plan {
-            return Hit::MISS;
-        }
-        run_query(
-            mesh,
-            self.shape.bounds,
-            ray,
-            None,
-            Walk::<true, false> {
+        run_clipped_query(mesh, self.shape.bounds, ray, None, |ray| {
+            Some(Walk::<true, false> {
                 grid: self,
                 mesh,
                 work,
-                plan,
-            },
-        )
+                plan: Plan::entering(self, ray)?,
+            })
+        })
     }
 
     /// Where cell `index`'s list starts and ends in the lists (blocks or ids).
@@ -394,37 +386,31 @@ impl RayQuery for UniformGrid {
 }
 
 impl AcceptingQuery for UniformGrid {
-    // Out of line, so plain queries share this one copy of the walks. The box first: a ray that
-    // misses it is not prepared for the triangle test.
+    // Out of line, so plain queries share this one copy of the walks.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
-        let plan = Plan::of(self, ray);
-        if let Plan::Miss = plan {
-            return Hit::MISS;
-        }
         let work = &mut GridWork::default();
-        let walk = Walk::<false, false> {
-            grid: self,
-            mesh,
-            work,
-            plan,
-        };
-        run_query(mesh, self.shape.bounds, ray, accept, walk)
+        run_clipped_query(mesh, self.shape.bounds, ray, accept, |ray| {
+            Some(Walk::<false, false> {
+                grid: self,
+                mesh,
+                work,
+                plan: Plan::entering(self, ray)?,
+            })
+        })
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
-        let plan = Plan::of(self, ray);
-        if let Plan::Miss = plan {
-            return false;
-        }
         let work = &mut GridWork::default();
-        let walk = Walk::<false, true> {
-            grid: self,
-            mesh,
-            work,
-            plan,
-        };
-        run_query(mesh, self.shape.bounds, ray, accept, walk).is_hit()
+        run_clipped_query(mesh, self.shape.bounds, ray, accept, |ray| {
+            Some(Walk::<false, true> {
+                grid: self,
+                mesh,
+                work,
+                plan: Plan::entering(self, ray)?,
+            })
+        })
+        .is_hit()
     }
 }

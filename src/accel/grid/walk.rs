@@ -15,8 +15,8 @@ use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
 use crate::triangle::{AnyKernel, PreparedRay, TriangleLoop, TriangleTest};
 
-/// One query's walk of the line `plan` (from [`Plan::of`] on the same ray, before it was prepared
-/// for the triangle test). `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
+/// One query's walk of the line `plan` (from [`Plan::entering`] on the same ray, before it was
+/// prepared for the triangle test). `COUNT` counts the work; `ANY` stops at the first hit (any-hit query).
 pub(super) struct Walk<'a, const COUNT: bool, const ANY: bool> {
     pub grid: &'a UniformGrid,
     pub mesh: &'a TriMesh,
@@ -56,17 +56,19 @@ pub(super) enum Plan {
 }
 
 impl Plan {
-    /// How `grid` answers `ray`: [`Plan::Miss`] when the grid is empty or the ray misses its box,
-    /// else [`Line::of`]. Made from the ray before it is prepared for the triangle test, so that a
-    /// ray that misses the box pays for nothing else; a ray the test refuses (a NaN or infinite
-    /// component) may get any plan (every value is a float operation: nothing can panic), and the
-    /// query refuses it after.
+    /// How `grid` answers `ray`, or `None` when the grid is empty or the ray misses its box
+    /// ([`Line::of`]). Made from the ray before it is prepared for the triangle test
+    /// (`run_clipped_query`); a ray the test refuses (a NaN or infinite component) may get any
+    /// plan (every value is a float operation: nothing can panic), and the query refuses it after.
     #[inline(always)]
-    pub(super) fn of(grid: &UniformGrid, ray: &Ray) -> Plan {
+    pub(super) fn entering(grid: &UniformGrid, ray: &Ray) -> Option<Plan> {
         if grid.offsets.is_empty() {
-            return Plan::Miss;
+            return None;
         }
-        Line::of(grid, ray.org, ray.dir, ray.tmin, ray.tmax)
+        match Line::of(grid, ray.org, ray.dir, ray.tmin, ray.tmax) {
+            Plan::Miss => None,
+            plan => Some(plan),
+        }
     }
 }
 

@@ -3,7 +3,7 @@
 
 use alloc::vec::Vec;
 
-use crate::accel::{run_query, Aabb, AcceptingQuery, RayQuery};
+use crate::accel::{run_clipped_query, Aabb, AcceptingQuery, RayQuery};
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
@@ -54,7 +54,7 @@ impl KdTreeParams {
     /// of four; 0.5 until stop 34: once the AVX filter tested lists two blocks at a time (stop 33),
     /// bigger leaves cost less, and over the evaluation's 29 scenes below a million triangles
     /// `C_i = 0.35` built in 0.87× the time of 0.5 with the same time per ray (0.989–0.994 in the
-    /// geometric mean, six alternated runs; tetra-10k 1.01–1.03, hair-50k 0.95);
+    /// geometric mean, six alternated runs; tetra-10k 0.99–1.02, hair-50k 0.95);
     /// docs/performance.md, "Stop 34") and empty-space bonus 0.125 (stop 25: against 0.5, 0.94×
     /// the time per ray in the
     /// geometric mean over 29 scenes in two runs, 0.80–1.02× per scene, the build unchanged;
@@ -303,21 +303,14 @@ impl KdTree {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
-        let Some(clip) = Clip::new(ray, &self.bounds) else {
-            return Hit::MISS;
-        };
-        run_query(
-            mesh,
-            self.bounds,
-            ray,
-            None,
-            Walk::<true, false> {
+        run_clipped_query(mesh, self.bounds, ray, None, |ray| {
+            Some(Walk::<true, false> {
                 tree: self,
                 mesh,
                 work,
-                clip,
-            },
-        )
+                clip: Clip::new(ray, &self.bounds)?,
+            })
+        })
     }
 }
 
@@ -336,35 +329,31 @@ impl RayQuery for KdTree {
 }
 
 impl AcceptingQuery for KdTree {
-    // Out of line, so plain queries share this one copy of the walks. The box first: a ray that
-    // misses it is not prepared for the triangle test.
+    // Out of line, so plain queries share this one copy of the walks.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
-        let Some(clip) = Clip::new(ray, &self.bounds) else {
-            return Hit::MISS;
-        };
         let work = &mut KdWork::default();
-        let walk = Walk::<false, false> {
-            tree: self,
-            mesh,
-            work,
-            clip,
-        };
-        run_query(mesh, self.bounds, ray, accept, walk)
+        run_clipped_query(mesh, self.bounds, ray, accept, |ray| {
+            Some(Walk::<false, false> {
+                tree: self,
+                mesh,
+                work,
+                clip: Clip::new(ray, &self.bounds)?,
+            })
+        })
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
-        let Some(clip) = Clip::new(ray, &self.bounds) else {
-            return false;
-        };
         let work = &mut KdWork::default();
-        let walk = Walk::<false, true> {
-            tree: self,
-            mesh,
-            work,
-            clip,
-        };
-        run_query(mesh, self.bounds, ray, accept, walk).is_hit()
+        run_clipped_query(mesh, self.bounds, ray, accept, |ray| {
+            Some(Walk::<false, true> {
+                tree: self,
+                mesh,
+                work,
+                clip: Clip::new(ray, &self.bounds)?,
+            })
+        })
+        .is_hit()
     }
 }
