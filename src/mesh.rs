@@ -223,35 +223,42 @@ impl TriMesh {
     }
 
     /// Recomputes the degenerate flags of triangles `range`, then the count and the bounds.
+    ///
+    /// One pass over the triangles, 32 at a time (a flag word): each is read once for its flag and
+    /// the bounds, not once for each (two passes over a copy larger than the cache).
     fn classify(&mut self, range: core::ops::Range<usize>) {
-        let range = range.start..range.end.min(self.tris.len());
-        for i in range.clone() {
-            let bit = 1 << (i % 32);
-            if let Some(word) = self.degenerate_bits.get_mut(i / 32) {
-                *word = if is_degenerate(&self.tris[i]) {
-                    *word | bit
-                } else {
-                    *word & !bit
-                };
-            }
-        }
         // Four lanes at a time (the fourth unused); coordinates are finite, so `min`/`max` need no
         // NaN handling.
         let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        for (tris, &word) in self.tris.chunks(32).zip(&self.degenerate_bits) {
+        let mut degenerate = 0;
+        for (w, (tris, word)) in self
+            .tris
+            .chunks(32)
+            .zip(self.degenerate_bits.iter_mut())
+            .enumerate()
+        {
+            // The chunk's part of `range`: its flags are made anew, the others kept.
+            let base = w * 32;
+            let a = range.start.saturating_sub(base).min(tris.len());
+            let b = range.end.saturating_sub(base).min(tris.len());
+            if a < b {
+                let mut flags = *word & !(((1u64 << b) - (1u64 << a)) as u32);
+                for (i, tri) in tris.iter().enumerate().take(b).skip(a) {
+                    flags |= u32::from(is_degenerate(tri)) << i;
+                }
+                *word = flags;
+            }
+            let flags = *word;
+            degenerate += flags.count_ones() as usize;
             for (i, tri) in tris.iter().enumerate() {
-                if word & (1 << i) == 0 {
+                if flags & (1 << i) == 0 {
                     let [p, q, r] = tri.map(Vec3A::from);
                     lo = lo.min(p.min(q).min(r));
                     hi = hi.max(p.max(q).max(r));
                 }
             }
         }
-        self.degenerate = self
-            .degenerate_bits
-            .iter()
-            .map(|w| w.count_ones() as usize)
-            .sum();
+        self.degenerate = degenerate;
         self.bounds = Aabb {
             min: lo.into(),
             max: hi.into(),
@@ -451,5 +458,62 @@ impl MeshData {
         self.vertices
             .iter()
             .fold(Aabb::EMPTY, |b, &v| b.grow(Vec3::from(v)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::workload::SplitMix64;
+
+    /// `count` random triangles, each with its own three vertices; every fifth has its third
+    /// corner at its second's position (degenerate until its vertices move apart).
+    fn part(count: usize, rng: &mut SplitMix64) -> MeshData {
+        let mut data = MeshData::default();
+        for i in 0..count {
+            let b = data.vertices.len() as u32;
+            let mut corner = || [rng.next_f32(), rng.next_f32(), rng.next_f32()];
+            let (p, q) = (corner(), corner());
+            data.vertices
+                .extend([p, q, if i % 5 == 0 { q } else { corner() }]);
+            data.indices.push([b, b + 1, b + 2]);
+        }
+        data
+    }
+
+    fn mesh_of(parts: &[MeshData]) -> TriMesh {
+        let sources: Vec<IndexedMesh<'_>> = parts.iter().map(MeshData::as_source).collect();
+        let dyns: Vec<&dyn MeshSource> = sources.iter().map(|s| s as &dyn MeshSource).collect();
+        TriMesh::from_sources(&dyns, &mut MemoryBudget::new(0)).unwrap()
+    }
+
+    /// Moving one geometry whose triangles straddle flag words leaves the flags, their count and the
+    /// bounds those of a fresh copy of the moved geometries: the moved range's flags are made anew
+    /// (triangles that become degenerate and ones that stop being), the other geometries' kept.
+    #[test]
+    fn a_move_classifies_as_a_fresh_copy() {
+        let mut rng = SplitMix64::new(5);
+        let mut parts = [37, 50, 20].map(|n| part(n, &mut rng));
+        let mut mesh = mesh_of(&parts);
+        let before = mesh.degenerate_count();
+        assert_eq!(before, 8 + 10 + 4);
+        // Every vertex moved out to new random places, then every third triangle collapsed (from
+        // the third: mesh triangle 63, the last of a flag word, among them).
+        let mut moved: Vec<[f32; 3]> = (0..parts[1].vertices.len())
+            .map(|_| [rng.next_f32(), rng.next_f32(), rng.next_f32()].map(|c| c * 7.0 - 3.0))
+            .collect();
+        for t in (2..50).step_by(3) {
+            moved[3 * t + 2] = moved[3 * t];
+        }
+        mesh.set_vertices(1, &|i| moved[i]).unwrap();
+        parts[1].vertices = moved;
+        let fresh = mesh_of(&parts);
+        assert_eq!(mesh.degenerate_bits(), fresh.degenerate_bits());
+        assert_eq!(mesh.degenerate_count(), fresh.degenerate_count());
+        assert_eq!(mesh.bounds(), fresh.bounds());
+        // Geometry 1 went from 10 degenerate triangles (every fifth) to 16 (every third).
+        assert_eq!(mesh.degenerate_count(), before - 10 + 16);
+        assert!(mesh.is_degenerate(63) && !mesh.is_degenerate(62));
+        assert!(mesh.bounds().min.x < -1.0 && mesh.bounds().max.x > 2.0);
     }
 }
