@@ -56,14 +56,18 @@ pub trait MeshSource {
     }
 
     /// Appends every triangle's corners to `tris` and its indices to `indices`, both with room
-    /// for `triangle_count()` more; or, leaving both as they were, refuses the first triangle with
-    /// an index out of range. Provided (one call per geometry, the accessors inlined).
+    /// for `triangle_count()` more, recording each in `classified` as it goes (one pass over the
+    /// triangles, not a second over the copy); or, leaving both as they were, refuses the first
+    /// triangle with an index out of range (`classified` may then hold some of the geometry's
+    /// triangles: the mesh is dropped). Provided (one call per geometry, the accessors inlined).
     fn copy_triangles(
         &self,
         tris: &mut Vec<[Vec3; 3]>,
         indices: &mut Vec<[u32; 3]>,
+        classified: &mut Classified<'_>,
     ) -> Result<(), MeshError> {
         let (n, nv) = (self.triangle_count(), self.vertex_count());
+        let first = tris.len();
         let (Some(corners), Some(ids)) = (
             tris.spare_capacity_mut().get_mut(..n),
             indices.spare_capacity_mut().get_mut(..n),
@@ -78,7 +82,9 @@ pub trait MeshSource {
                 return Err(index_out_of_range(i, idx, nv));
             }
             id.write(idx);
-            corner.write(idx.map(|vi| Vec3::from(self.vertex(vi as usize))));
+            let tri = idx.map(|vi| Vec3::from(self.vertex(vi as usize)));
+            classified.record(first + i, &tri);
+            corner.write(tri);
         }
         let (t, x) = (tris.len() + n, indices.len() + n);
         // SAFETY: the first `n` slots past each length were written above, and both vectors have
@@ -112,6 +118,66 @@ fn index_out_of_range(triangle: usize, idx: [u32; 3], vertex_count: usize) -> Me
         triangle,
         index,
         vertex_count,
+    }
+}
+
+/// What [`MeshSource::copy_triangles`] learns of the triangles it copies: which are degenerate (in
+/// the mesh's flag words, clear before the copy), how many, and the bounds of the others. Made and
+/// read by [`TriMesh`] alone.
+#[derive(Debug)]
+pub struct Classified<'a> {
+    flags: &'a mut [u32],
+    degenerate: usize,
+    lo: Vec3A,
+    hi: Vec3A,
+}
+
+impl<'a> Classified<'a> {
+    fn new(flags: &'a mut [u32]) -> Self {
+        Classified {
+            flags,
+            degenerate: 0,
+            lo: Vec3A::INFINITY,
+            hi: Vec3A::NEG_INFINITY,
+        }
+    }
+
+    /// Triangle `i` (`tri`, finite coordinates), whose flag is clear: flagged if degenerate,
+    /// otherwise taken into the bounds.
+    #[inline(always)]
+    fn record(&mut self, i: usize, tri: &[Vec3; 3]) {
+        if is_degenerate(tri) {
+            if let Some(word) = self.flags.get_mut(i / 32) {
+                *word |= 1 << (i % 32);
+            }
+            self.degenerate += 1;
+        } else {
+            self.include(tri);
+        }
+    }
+
+    /// Whether triangle `i`'s flag is set.
+    #[inline(always)]
+    fn flagged(&self, i: usize) -> bool {
+        self.flags
+            .get(i / 32)
+            .is_some_and(|w| w & (1 << (i % 32)) != 0)
+    }
+
+    /// A triangle that is not degenerate, taken into the bounds. Four lanes at a time (the fourth
+    /// unused); coordinates are finite, so `min`/`max` need no NaN handling.
+    #[inline(always)]
+    fn include(&mut self, tri: &[Vec3; 3]) {
+        let [p, q, r] = tri.map(Vec3A::from);
+        self.lo = self.lo.min(p.min(q).min(r));
+        self.hi = self.hi.max(p.max(q).max(r));
+    }
+
+    fn bounds(&self) -> Aabb {
+        Aabb {
+            min: self.lo.into(),
+            max: self.hi.into(),
+        }
     }
 }
 
@@ -204,10 +270,11 @@ impl TriMesh {
             mesh.release(budget);
             return Err(refusal(sources.len()).unwrap_or(e));
         }
+        let mut classified = Classified::new(&mut mesh.degenerate_bits);
         for (g, src) in sources.iter().enumerate() {
             let copied = match src.first_non_finite_vertex() {
                 Some(vertex) => Err(MeshError::NonFiniteVertex { vertex }),
-                None => src.copy_triangles(&mut mesh.tris, &mut mesh.indices),
+                None => src.copy_triangles(&mut mesh.tris, &mut mesh.indices, &mut classified),
             };
             if let Err(error) = copied {
                 mesh.release(budget);
@@ -218,51 +285,31 @@ impl TriMesh {
             mesh.vertex_counts.push(src.vertex_count());
         }
         mesh.starts.push(mesh.tris.len() as u32);
-        mesh.classify(0..n);
+        (mesh.degenerate, mesh.bounds) = (classified.degenerate, classified.bounds());
         Ok(mesh)
     }
 
-    /// Recomputes the degenerate flags of triangles `range`, then the count and the bounds.
-    ///
-    /// One pass over the triangles, 32 at a time (a flag word): each is read once for its flag and
-    /// the bounds, not once for each (two passes over a copy larger than the cache).
+    /// Recomputes the degenerate flags of triangles `range`, then the count and the bounds, in
+    /// one pass over the triangles (each read once for its flag and the bounds).
     fn classify(&mut self, range: core::ops::Range<usize>) {
-        // Four lanes at a time (the fourth unused); coordinates are finite, so `min`/`max` need no
-        // NaN handling.
-        let (mut lo, mut hi) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
-        let mut degenerate = 0;
-        for (w, (tris, word)) in self
-            .tris
-            .chunks(32)
-            .zip(self.degenerate_bits.iter_mut())
-            .enumerate()
-        {
-            // The chunk's part of `range`: its flags are made anew, the others kept.
-            let base = w * 32;
-            let a = range.start.saturating_sub(base).min(tris.len());
-            let b = range.end.saturating_sub(base).min(tris.len());
-            if a < b {
-                let mut flags = *word & !(((1u64 << b) - (1u64 << a)) as u32);
-                for (i, tri) in tris.iter().enumerate().take(b).skip(a) {
-                    flags |= u32::from(is_degenerate(tri)) << i;
-                }
-                *word = flags;
-            }
-            let flags = *word;
-            degenerate += flags.count_ones() as usize;
-            for (i, tri) in tris.iter().enumerate() {
-                if flags & (1 << i) == 0 {
-                    let [p, q, r] = tri.map(Vec3A::from);
-                    lo = lo.min(p.min(q).min(r));
-                    hi = hi.max(p.max(q).max(r));
-                }
+        let range = range.start..range.end.min(self.tris.len());
+        for i in range.clone() {
+            if let Some(word) = self.degenerate_bits.get_mut(i / 32) {
+                *word &= !(1 << (i % 32));
             }
         }
-        self.degenerate = degenerate;
-        self.bounds = Aabb {
-            min: lo.into(),
-            max: hi.into(),
-        };
+        // The others' flags stay as they are: read, counted, and their triangles' bounds taken.
+        let mut classified = Classified::new(&mut self.degenerate_bits);
+        for (i, tri) in self.tris.iter().enumerate() {
+            if range.contains(&i) {
+                classified.record(i, tri);
+            } else if classified.flagged(i) {
+                classified.degenerate += 1;
+            } else {
+                classified.include(tri);
+            }
+        }
+        (self.degenerate, self.bounds) = (classified.degenerate, classified.bounds());
     }
 
     /// Number of geometries.
