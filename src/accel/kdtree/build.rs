@@ -1064,27 +1064,51 @@ impl Builder<'_> {
             return Ok((0, right.len(), true));
         }
         let what = "kd-tree build triangles";
-        grow(self.budget, left, split.left, what)?;
-        grow(self.budget, right, split.right, what)?;
+        // One slot more than the split's counts: room for the write that an item going the other
+        // way leaves behind (below).
+        grow(self.budget, left, split.left + 1, what)?;
+        grow(self.budget, right, split.right + 1, what)?;
+        // An item that goes one way is written to both children's next slot, and only the side it
+        // goes to counts it: no branch on the side, which is mispredicted about as often as not.
+        // The pointers, capacities and lengths stay in locals while items take this path; the
+        // vectors' own lengths are set before any other (a straddler, or a child without room).
+        let ends = |v: &mut Vec<Item>| (v.as_mut_ptr(), v.capacity(), v.len());
+        let ((mut lp, mut lcap, mut nl), (mut rp, mut rcap, mut nr)) = (ends(left), ends(right));
         for it in items.iter() {
             let (to_left, to_right) = sides(it);
+            if to_left != to_right && nl < lcap && nr < rcap {
+                // SAFETY: both slots are within the capacities (checked), and a count grows by one
+                // only over the slot just written, so every element below it was written; an
+                // item is `Copy`.
+                unsafe {
+                    lp.add(nl).write(*it);
+                    rp.add(nr).write(*it);
+                }
+                nl += usize::from(to_left);
+                nr += usize::from(to_right);
+                continue;
+            }
+            // SAFETY: as above: the elements below each count were written.
+            unsafe {
+                left.set_len(nl);
+                right.set_len(nr);
+            }
             if to_left && to_right {
-                let Some(tri) = self.mesh.triangle(it.prim) else {
-                    continue;
-                };
-                let part = Aabb {
-                    min: glam::Vec3::from(it.lo),
-                    max: glam::Vec3::from(it.hi),
-                };
-                let (lower, upper) = split_bounds(tri, &part, axis, pos);
-                for (c, child) in [(lower, &mut *left), (upper, &mut *right)] {
-                    if !c.is_empty() {
-                        let part = Item {
-                            lo: c.min.to_array(),
-                            hi: c.max.to_array(),
-                            prim: it.prim,
-                        };
-                        self.budget.push(child, part, what)?;
+                if let Some(tri) = self.mesh.triangle(it.prim) {
+                    let part = Aabb {
+                        min: glam::Vec3::from(it.lo),
+                        max: glam::Vec3::from(it.hi),
+                    };
+                    let (lower, upper) = split_bounds(tri, &part, axis, pos);
+                    for (c, child) in [(lower, &mut *left), (upper, &mut *right)] {
+                        if !c.is_empty() {
+                            let part = Item {
+                                lo: c.min.to_array(),
+                                hi: c.max.to_array(),
+                                prim: it.prim,
+                            };
+                            self.budget.push(child, part, what)?;
+                        }
                     }
                 }
             } else if to_left {
@@ -1092,6 +1116,12 @@ impl Builder<'_> {
             } else {
                 self.budget.push(right, *it, what)?;
             }
+            ((lp, lcap, nl), (rp, rcap, nr)) = (ends(left), ends(right));
+        }
+        // SAFETY: as above.
+        unsafe {
+            left.set_len(nl);
+            right.set_len(nr);
         }
         Ok((left.len(), right.len(), false))
     }
