@@ -18,7 +18,7 @@ fn round_down(x: f64) -> f32 {
     let bits = f.to_bits();
     let below = bits.wrapping_add((bits >> 31) << 1).wrapping_sub(1);
     let rounded_up = 0u32.wrapping_sub(u32::from(f64::from(f) > x));
-    f32::from_bits((below & rounded_up) | (f.to_bits() & !rounded_up))
+    f32::from_bits((below & rounded_up) | (bits & !rounded_up))
 }
 
 /// The smallest f32 not below `x` (`x` not NaN): the mirror of [`round_down`], as rounding to
