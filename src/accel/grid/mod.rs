@@ -294,8 +294,21 @@ impl UniformGrid {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut GridWork) -> Hit {
-        run_clipped_query(mesh, self.shape.bounds, ray, None, |ray| {
-            Some(Walk::<true, false> {
+        self.query::<true, false>(mesh, ray, None, work)
+    }
+
+    /// Every query's walk: the ray's plan through the grid (its box first), then the walk
+    /// (`COUNT` counts the work in `work`; `ANY` stops at the first hit).
+    #[inline(always)]
+    fn query<const COUNT: bool, const ANY: bool>(
+        &self,
+        mesh: &TriMesh,
+        ray: &Ray,
+        accept: Option<&dyn Accept>,
+        work: &mut GridWork,
+    ) -> Hit {
+        run_clipped_query(mesh, self.shape.bounds, ray, accept, |ray| {
+            Some(Walk::<COUNT, ANY> {
                 grid: self,
                 mesh,
                 work,
@@ -389,28 +402,12 @@ impl AcceptingQuery for UniformGrid {
     // Out of line, so plain queries share this one copy of the walks.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
-        let work = &mut GridWork::default();
-        run_clipped_query(mesh, self.shape.bounds, ray, accept, |ray| {
-            Some(Walk::<false, false> {
-                grid: self,
-                mesh,
-                work,
-                plan: Plan::entering(self, ray)?,
-            })
-        })
+        self.query::<false, false>(mesh, ray, accept, &mut GridWork::default())
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
-        let work = &mut GridWork::default();
-        run_clipped_query(mesh, self.shape.bounds, ray, accept, |ray| {
-            Some(Walk::<false, true> {
-                grid: self,
-                mesh,
-                work,
-                plan: Plan::entering(self, ray)?,
-            })
-        })
-        .is_hit()
+        self.query::<false, true>(mesh, ray, accept, &mut GridWork::default())
+            .is_hit()
     }
 }

@@ -303,8 +303,21 @@ impl KdTree {
 
     /// The closest hit, also counting the work done.
     pub fn intersect_counted(&self, mesh: &TriMesh, ray: &Ray, work: &mut KdWork) -> Hit {
-        run_clipped_query(mesh, self.bounds, ray, None, |ray| {
-            Some(Walk::<true, false> {
+        self.query::<true, false>(mesh, ray, None, work)
+    }
+
+    /// Every query's walk: the ray clipped to the tree's box, then the walk (`COUNT` counts the
+    /// work in `work`; `ANY` stops at the first hit).
+    #[inline(always)]
+    fn query<const COUNT: bool, const ANY: bool>(
+        &self,
+        mesh: &TriMesh,
+        ray: &Ray,
+        accept: Option<&dyn Accept>,
+        work: &mut KdWork,
+    ) -> Hit {
+        run_clipped_query(mesh, self.bounds, ray, accept, |ray| {
+            Some(Walk::<COUNT, ANY> {
                 tree: self,
                 mesh,
                 work,
@@ -332,28 +345,12 @@ impl AcceptingQuery for KdTree {
     // Out of line, so plain queries share this one copy of the walks.
     #[inline(never)]
     fn intersect_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> Hit {
-        let work = &mut KdWork::default();
-        run_clipped_query(mesh, self.bounds, ray, accept, |ray| {
-            Some(Walk::<false, false> {
-                tree: self,
-                mesh,
-                work,
-                clip: Clip::new(ray, &self.bounds)?,
-            })
-        })
+        self.query::<false, false>(mesh, ray, accept, &mut KdWork::default())
     }
 
     #[inline(never)]
     fn occluded_accepting(&self, mesh: &TriMesh, ray: &Ray, accept: Option<&dyn Accept>) -> bool {
-        let work = &mut KdWork::default();
-        run_clipped_query(mesh, self.bounds, ray, accept, |ray| {
-            Some(Walk::<false, true> {
-                tree: self,
-                mesh,
-                work,
-                clip: Clip::new(ray, &self.bounds)?,
-            })
-        })
-        .is_hit()
+        self.query::<false, true>(mesh, ray, accept, &mut KdWork::default())
+            .is_hit()
     }
 }
