@@ -121,12 +121,14 @@ pub fn cross_validated_errors(
         .collect()
 }
 
-const fn terms(grid: [bool; 3], kd_build: [bool; 2], kd_ray: [bool; 3]) -> Terms {
+/// The terms of a variant: the grid's per-ray terms and the kd-tree's (fixed, cell, test), the
+/// kd-tree's build terms, and whether both per-ray parts take the memory term.
+const fn terms(grid: [bool; 3], kd_build: [bool; 2], kd_ray: [bool; 3], memory: bool) -> Terms {
     Terms([
-        [true, false, false],
-        grid,
-        [kd_build[0], kd_build[1], false],
-        kd_ray,
+        [true, false, false, false],
+        [grid[0], grid[1], grid[2], memory],
+        [kd_build[0], kd_build[1], false, false],
+        [kd_ray[0], kd_ray[1], kd_ray[2], memory],
     ])
 }
 
@@ -134,28 +136,42 @@ const ALL3: [bool; 3] = [true, true, true];
 
 /// The model variants compared, fewest terms first: a term stays only if it lowers the
 /// cross-validated error.
-pub const VARIANTS: [(&str, Terms); 6] = [
+pub const VARIANTS: [(&str, Terms); 7] = [
     (
         "kd ray constant",
-        terms(ALL3, [true, true], [true, false, false]),
+        terms(ALL3, [true, true], [true, false, false], false),
     ),
     (
         "grid tests only",
-        terms([false, false, true], [true, true], [false, false, true]),
+        terms(
+            [false, false, true],
+            [true, true],
+            [false, false, true],
+            false,
+        ),
     ),
     (
         "grid without cells",
-        terms([true, false, true], [true, true], [true, false, true]),
+        terms(
+            [true, false, true],
+            [true, true],
+            [true, false, true],
+            false,
+        ),
     ),
     (
         "kd ray without cells",
-        terms(ALL3, [true, true], [true, false, true]),
+        terms(ALL3, [true, true], [true, false, true], false),
     ),
     (
         "kd build without grid references",
-        terms(ALL3, [true, false], ALL3),
+        terms(ALL3, [true, false], ALL3, false),
     ),
-    ("all terms", Terms::ALL),
+    (
+        "kd build without grid references, memory levels",
+        terms(ALL3, [true, false], ALL3, true),
+    ),
+    ("all terms", terms(ALL3, [true, true], ALL3, true)),
 ];
 
 /// The variant with the lowest leave-one-out median W* error (ties to the earlier, smaller one),
