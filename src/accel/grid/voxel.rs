@@ -10,13 +10,14 @@
 //! conditions is a pair of linear inequalities in the cell's centre, so for a fixed row (or column)
 //! of cells it is an interval of the remaining coordinate: rows of the projection onto the plane
 //! most facing the triangle give runs of columns, and each column a run of cells along the third
-//! axis — the overlapped cells, with work proportional to them plus the rows.
+//! axis — the overlapped cells, with work proportional to them plus the rows. Footprints of up to
+//! four cells an axis are cheaper tested cell by cell, four cells at a time, as bit masks.
 //!
 //! The footprint is computed in f32 with a pad that covers its rounding, the row inequalities in
-//! f64 cell units (`(p − min) / size`), the masks of small footprints in f32 cell units from the
-//! footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10, far
-//! above the rounding of these few operations (docs/design.md bounds it), so no cell the exact test
-//! would accept is dropped.
+//! f64 cell units (`(p − min) / size`), the masks (2×2×2 or 4×4×4 cells) in f32 cell units from
+//! the footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10,
+//! far above the rounding of these few operations (docs/design.md bounds it), so no cell the exact
+//! test would accept is dropped.
 
 use glam::{Vec3, Vec3A, Vec4};
 
@@ -245,10 +246,69 @@ impl Cells {
         let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
         if !exact || thick.iter().filter(|&&t| t).count() < 2 {
             self.for_box(fp, emit);
+        } else if (0..3).all(|a| fp.len(a) <= MEDIUM_CELLS) {
+            let mut mask = self.medium(tri, fp, thick);
+            let base = self.index(fp.lo);
+            while mask != 0 {
+                let bit = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                // `stride[0]` is 1.
+                let cell = base
+                    + (bit & 3)
+                    + ((bit >> 2) & 3) * self.stride[1]
+                    + (bit >> 4) * self.stride[2];
+                emit(cell as u32);
+            }
         } else {
             let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
             self.overlapped(&q, fp, thick, emit);
         }
+    }
+
+    /// The cells a triangle overlaps among those of a footprint of at most [`MEDIUM_CELLS`] cells
+    /// per axis, two or more on two or three axes (`thick`), as bits `i + 4j + 16k` (the cell `i,
+    /// j, k` up from the footprint's corner): [`Cells::small`]'s tests on a 4×4×4 block, each
+    /// projection's edges as a mask of its 4×4 cells, four at a time, and the plane. A strand of
+    /// hair crossing a few cells takes ~4× fewer instructions so than by rows
+    /// ([`Cells::overlapped`]; docs/performance.md, "Stop 37").
+    ///
+    /// In f32, in cell units from the footprint's corner (values below `4 + 2·margin`): the
+    /// roundings of each test are below `24u` of its width (twice `small`'s bound, for twice the
+    /// extent), well inside the rounding slack.
+    #[inline(never)]
+    fn medium(&self, tri: &[Vec3; 3], fp: &Footprint, thick: [bool; 3]) -> u64 {
+        let q = tri.map(|p| [0, 1, 2].map(|a| (self.local(p[a], a) - f64::from(fp.lo[a])) as f32));
+        let half = self.half.map(|h| h as f32);
+        let grid = |x: usize, y: usize| grid_mask(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
+        // Each projection's 16 bits spread over the third axis: (x, y) over k, (z, x) (bits i +
+        // 4k) over j, (y, z) (bits j + 4k) over i.
+        let over_k = |m: u32| u64::from(m) * LAYERS[3];
+        let over_j = |m: u32| {
+            (0..4).fold(0u64, |acc, k| {
+                acc | (u64::from((m >> (4 * k)) & 0xf) * 0x1111) << (16 * k)
+            })
+        };
+        let over_i = |m: u32| {
+            (0..4).fold(0u64, |acc, k| {
+                acc | u64::from(NIBBLES[((m >> (4 * k)) & 0xf) as usize]) << (16 * k)
+            })
+        };
+        // The footprint's own cells (`n + 1` per axis, at most 4).
+        let n = [0, 1, 2].map(|a| (fp.hi[a] - fp.lo[a]) as usize & 3);
+        let footprint = ((1u64 << (n[0] + 1)) - 1) * ROWS[n[1]] * LAYERS[n[2]];
+        let mask = match thick {
+            // One cell thick on an axis: the projection onto the other two decides (for_each).
+            [false, _, _] => over_i(grid(1, 2)),
+            [_, false, _] => over_j(grid(0, 2)),
+            [_, _, false] => over_k(grid(0, 1)),
+            _ => {
+                over_k(grid(0, 1))
+                    & over_j(grid(0, 2))
+                    & over_i(grid(1, 2))
+                    & grid_plane_mask(&q, half)
+            }
+        };
+        mask & footprint
     }
 
     /// The cells a triangle overlaps among those of a footprint of at most two cells per axis,
@@ -410,6 +470,90 @@ const FOOTPRINT_MASK: [u8; 8] = {
     }
     t
 };
+
+/// The most cells per axis of a footprint that [`Cells::medium`] takes.
+const MEDIUM_CELLS: u32 = 4;
+
+/// A row of [`Cells::medium`]'s bits (4 bits) repeated over the first `n + 1` rows of a 16-bit
+/// layer, as a multiplier.
+const ROWS: [u64; 4] = [0x1, 0x11, 0x111, 0x1111];
+
+/// A 16-bit layer repeated over the first `n + 1` layers, as a multiplier.
+const LAYERS: [u64; 4] = [0x1, 0x1_0001, 0x1_0001_0001, 0x1_0001_0001_0001];
+
+/// Each of 4 bits spread to a nibble (bit `b` to bits `4b..4b + 4`).
+const NIBBLES: [u16; 16] = {
+    let mut t = [0u16; 16];
+    let mut m = 0;
+    while m < 16 {
+        let mut b = 0;
+        while b < 4 {
+            if m & (1 << b) != 0 {
+                t[m] |= 0xf << (4 * b);
+            }
+            b += 1;
+        }
+        m += 1;
+    }
+    t
+};
+
+/// The centres of a 4×4 block's cells on the first axis.
+const GRID_X: Vec4 = Vec4::new(0.5, 1.5, 2.5, 3.5);
+
+/// Which of the 4×4 cells centred at `(0.5 + i, 0.5 + j)`, `i, j < 4`, of half extent `half` the
+/// projected triangle `p` may meet (bit `i + 4j`): [`quad_mask`] on a larger block.
+#[inline(always)]
+fn grid_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
+    let mut mask = 0xffff;
+    for i in 0..3 {
+        let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+        let (a, b) = (e[1] - s[1], s[0] - e[0]);
+        let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
+        let r = a.abs() * half[0] + b.abs() * half[1];
+        let (lo, hi) = (Vec4::splat(far.min(0.0) - r), Vec4::splat(far.max(0.0) + r));
+        // `a·(x − s0) + b·(y − s1)` at the cell centres: the columns' terms in lanes, each row's
+        // term splat from its lane (the same products as one expression per cell).
+        let cols = Vec4::splat(a) * (GRID_X - Vec4::splat(s[0]));
+        let rows = Vec4::splat(b) * (GRID_X - Vec4::splat(s[1]));
+        let inside = |v: Vec4| (!(v.cmplt(lo) | v.cmpgt(hi))).bitmask();
+        mask &= inside(cols + Vec4::splat(rows.x))
+            | inside(cols + Vec4::splat(rows.y)) << 4
+            | inside(cols + Vec4::splat(rows.z)) << 8
+            | inside(cols + Vec4::splat(rows.w)) << 12;
+    }
+    mask
+}
+
+/// Which of the 4×4×4 cells centred at `(0.5 + i, 0.5 + j, 0.5 + k)` of half extent `half` the
+/// triangle's plane may cross (bit `i + 4j + 16k`): [`plane_mask`] on a larger block.
+#[inline(always)]
+fn grid_plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u64 {
+    let d = |i: usize| [0, 1, 2].map(|a| q[i][a] - q[0][a]);
+    let (e1, e2) = (d(1), d(2));
+    let n = [
+        e1[1] * e2[2] - e1[2] * e2[1],
+        e1[2] * e2[0] - e1[0] * e2[2],
+        e1[0] * e2[1] - e1[1] * e2[0],
+    ];
+    let dot = |v: [f32; 3]| n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
+    let (d1, d2) = (dot(e1), dot(e2));
+    let r = n[0].abs() * half[0] + n[1].abs() * half[1] + n[2].abs() * half[2];
+    let lo = Vec4::splat(d1.min(d2).min(0.0) - r);
+    let hi = Vec4::splat(d1.max(d2).max(0.0) + r);
+    let cols = Vec4::splat(n[0]) * (GRID_X - Vec4::splat(q[0][0]));
+    let rows = Vec4::splat(n[1]) * (GRID_X - Vec4::splat(q[0][1]));
+    let layers = Vec4::splat(n[2]) * (GRID_X - Vec4::splat(q[0][2]));
+    let inside = |v: Vec4| u64::from((!(v.cmplt(lo) | v.cmpgt(hi))).bitmask());
+    let layer = |z: f32| {
+        let yz = rows + Vec4::splat(z);
+        inside(cols + Vec4::splat(yz.x))
+            | inside(cols + Vec4::splat(yz.y)) << 4
+            | inside(cols + Vec4::splat(yz.z)) << 8
+            | inside(cols + Vec4::splat(yz.w)) << 12
+    };
+    layer(layers.x) | layer(layers.y) << 16 | layer(layers.z) << 32 | layer(layers.w) << 48
+}
 
 /// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
 const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
