@@ -13,13 +13,7 @@ use rayq::{BudgetKind, BuildError, BuildOptions, Scene, Structure, RAYS_REMAININ
 /// grid 1 µs per ray plus 10 ns per cell and 1 ns per test (which the check after a kd-tree build
 /// prices both structures' counted work with; the built-in calibration has a cell at 18 tests).
 fn calibration(kd_ray: f64, build: f64) -> Calibration {
-    Calibration::new(
-        0,
-        [
-            10.0, 1000.0, 10.0, 1.0, build, 0.0, kd_ray, 0.0, 0.0, 0.0, 0.0,
-        ],
-    )
-    .unwrap()
+    Calibration::new(0, [10.0, 1000.0, 10.0, 1.0, build, 0.0, kd_ray, 0.0, 0.0]).unwrap()
 }
 
 /// A scene on which the kd-tree saves work (counted on the library's full set of sample rays, 24 × 24
@@ -291,11 +285,7 @@ fn a_switch_that_does_not_fit_the_memory_limit_keeps_the_grid() {
 fn caller_sample_rays_feed_the_estimate() {
     let data = kd_friendly();
     let mesh = mesh_of(&data);
-    let c = Calibration::new(
-        0,
-        [10.0, 1.0, 10.0, 30.0, 10.0, 0.0, 20.0, 0.0, 0.0, 0.0, 0.0],
-    )
-    .unwrap();
+    let c = Calibration::new(0, [10.0, 1.0, 10.0, 30.0, 10.0, 0.0, 20.0, 0.0, 0.0]).unwrap();
     // (1 ns per ray plus 10 per cell and 30 per test: rays that do nothing cost 1 ns.)
     // Rays that all miss (pointing away from the box) cost the grid no cells or tests.
     let away: Vec<rayq::Ray> = (0..64)

@@ -16,7 +16,7 @@ pub struct Constant {
 }
 
 /// The constants in blob order. Appending is a minor format change; anything else is a major one.
-pub const CONSTANTS: [Constant; 11] = [
+pub const CONSTANTS: [Constant; 9] = [
     Constant {
         name: "grid_build_ns_per_triangle",
         min: 0.0,
@@ -71,23 +71,7 @@ pub const CONSTANTS: [Constant; 11] = [
         max: 1e6,
         meaning: "kd-tree time per triangle test the same ray makes on the grid",
     },
-    Constant {
-        name: "grid_ns_per_ray_per_memory_level",
-        min: 0.0,
-        max: 1e6,
-        meaning: "grid time per ray per doubling of the grid's bytes past 8 MiB (minor 1)",
-    },
-    Constant {
-        name: "kd_ns_per_ray_per_memory_level",
-        min: 0.0,
-        max: 1e6,
-        meaning: "kd-tree time per ray per doubling of the grid's bytes past 8 MiB (minor 1)",
-    },
 ];
-
-/// Constants in minor layout 0 (before the memory terms): a blob of that layout reads with the
-/// later constants 0, the model without their terms, which is what it was fitted for.
-pub const CONSTANT_COUNT_MINOR_0: usize = 9;
 
 /// Number of constants in this layout.
 pub const CONSTANT_COUNT: usize = CONSTANTS.len();
@@ -109,7 +93,7 @@ pub const MAGIC: [u8; 8] = *b"RQCALIB\0";
 /// grid's counts, and its build on the grid's references, in place of format 2's hit fraction).
 pub const FORMAT_MAJOR: u16 = 3;
 /// Minor format version this writer produces.
-pub const FORMAT_MINOR: u16 = 1;
+pub const FORMAT_MINOR: u16 = 0;
 /// Bytes before the payload.
 pub const HEADER_LEN: usize = 32;
 /// Bytes of the trailing CRC-32.
@@ -184,8 +168,6 @@ pub const BUILTIN: Calibration = Calibration {
         99.80313906669828,
         4.238767131213792,
         2.033401397440324,
-        0.0,
-        0.0,
     ],
 };
 
@@ -283,16 +265,15 @@ impl Calibration {
         let count = payload
             .get(0..4)
             .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize);
-        // The payload holds its count of constants (at least minor 0's), then perhaps fields
-        // of a newer minor layout: the constants this reader knows are read, the rest ignored,
-        // and those an older minor layout lacks are 0.
-        let known = 4 + 8 * CONSTANT_COUNT_MINOR_0;
-        let count = match count {
-            Some(c) if c >= CONSTANT_COUNT_MINOR_0 && (payload.len() - 4) / 8 >= c => c,
+        // The payload holds its count of constants (at least this layout's), then perhaps fields
+        // of a newer minor layout: the constants this reader knows are read, the rest ignored.
+        let known = 4 + 8 * CONSTANT_COUNT;
+        match count {
+            Some(c) if c >= CONSTANT_COUNT && (payload.len() - 4) / 8 >= c => {}
             _ => return Err(truncated(HEADER_LEN + known + CRC_LEN)),
-        };
+        }
         let mut values = [0.0; CONSTANT_COUNT];
-        for (i, v) in values.iter_mut().enumerate().take(count) {
+        for (i, v) in values.iter_mut().enumerate() {
             let at = 4 + 8 * i;
             let mut b = [0u8; 8];
             b.copy_from_slice(&payload[at..at + 8]);
@@ -384,11 +365,7 @@ mod tests {
     #[test]
     fn round_trip() {
         let mut buf = [0u8; BLOB_LEN];
-        let c = Calibration::new(
-            42,
-            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0, 10.0, 11.0],
-        )
-        .unwrap();
+        let c = Calibration::new(42, [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0, 9.0]).unwrap();
         assert_eq!(c.to_bytes(&mut buf), Ok(BLOB_LEN));
         assert_eq!(Calibration::from_bytes(&buf), Ok(c));
     }
@@ -429,32 +406,6 @@ mod tests {
                 })
             );
         }
-    }
-
-    /// A blob of minor layout 0 (nine constants, before the memory terms) reads with those terms
-    /// 0; fewer constants than that are refused.
-    #[test]
-    fn minor_0_layout_reads_without_the_memory_terms() {
-        let old = |count: usize| {
-            let len = HEADER_LEN + 4 + 8 * count + CRC_LEN;
-            let mut full = [0u8; BLOB_LEN];
-            let mut c = BUILTIN;
-            c.values[9] = 5.0;
-            c.to_bytes(&mut full).unwrap();
-            let mut buf = full[..len].to_vec();
-            buf[10..12].copy_from_slice(&0u16.to_le_bytes());
-            let payload_len = (len - HEADER_LEN - CRC_LEN) as u32;
-            buf[12..16].copy_from_slice(&payload_len.to_le_bytes());
-            buf[32..36].copy_from_slice(&(count as u32).to_le_bytes());
-            let crc = crc32(&buf[..len - CRC_LEN]);
-            buf[len - CRC_LEN..].copy_from_slice(&crc.to_le_bytes());
-            Calibration::from_bytes(&buf).map(|c| c.values)
-        };
-        let mut want = BUILTIN.values;
-        want[9] = 0.0;
-        want[10] = 0.0;
-        assert_eq!(old(CONSTANT_COUNT_MINOR_0), Ok(want));
-        assert!(old(CONSTANT_COUNT_MINOR_0 - 1).is_err());
     }
 
     #[test]

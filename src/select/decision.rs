@@ -255,8 +255,8 @@ pub fn priced_work(
 /// The calibration's grid model per ray, in its term order: the fixed cost, a cell step, a test
 /// (nanoseconds); the constants the check's prices are relative to.
 pub(crate) fn grid_ray_constants(calibration: &Calibration) -> [f64; 3] {
-    let c = Part::GridRay.constants();
-    [0, 1, 2].map(|k| calibration.value(c[k]))
+    let first = Part::GridRay.constants().start;
+    [0, 1, 2].map(|k| calibration.value(first + k))
 }
 
 /// [`priced_work`]'s two structures, each as its fixed cost per ray and its counted work.
@@ -444,8 +444,7 @@ mod tests {
     /// fixed costs the verdict is the comparison of the work alone, even at a tie.
     #[test]
     fn the_check_prices_both_rays_from_the_grid_model() {
-        let cal =
-            Calibration::new(0, [1.0, 50.0, 4.0, 2.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0]).unwrap();
+        let cal = Calibration::new(0, [1.0, 50.0, 4.0, 2.0, 1.0, 0.0, 1.0, 0.0, 0.0]).unwrap();
         let grid = SceneFeatures {
             triangles: 1000,
             rays: 10,

@@ -85,7 +85,7 @@ pub fn fit(
     let mut values = [0.0; CONSTANT_COUNT];
     for part in Part::ALL {
         let coef = fit_part(observations, part, terms.of(part)).ok_or(FitError::NoObservations)?;
-        for (&i, c) in part.constants().iter().zip(coef) {
+        for (i, c) in part.constants().zip(coef) {
             values[i] = c.clamp(CONSTANTS[i].min, CONSTANTS[i].max);
         }
     }
@@ -225,9 +225,6 @@ pub struct CheckObservation {
     pub kd_ray_ns: f64,
 }
 
-/// The check's prices: fixed, node, test.
-const PRICES: usize = 3;
-
 /// The check's prices ([`CheckPrices`]) that fit `observations` best: least squares of the
 /// measured kd-tree − grid time per ray against the priced difference
 /// ([`crate::select::decision::priced_work`]), the grid's side priced by `calibration`. Observations
@@ -244,13 +241,13 @@ pub fn fit_check_prices(
             && (o.kd_ray_ns - o.grid_ray_ns).is_finite()
             && o.grid_ray_ns.is_finite()
     };
-    if observations.iter().filter(usable).count() < PRICES {
+    if observations.iter().filter(usable).count() < MAX_TERMS {
         return None;
     }
     // The kd-tree's priced time is `prices · terms`; it should equal the grid's priced time plus
     // the measured difference.
-    let mut a = [[0.0f64; PRICES]; PRICES];
-    let mut b = [0.0f64; PRICES];
+    let mut a = [[0.0f64; MAX_TERMS]; MAX_TERMS];
+    let mut b = [0.0f64; MAX_TERMS];
     for o in observations.iter().filter(usable) {
         let terms = [
             fixed,
@@ -260,9 +257,9 @@ pub fn fit_check_prices(
         // The grid's side, which no price of the kd-tree's changes.
         let (grid_priced, _) = priced_work(calibration, &o.grid, &o.kd, &CheckPrices::LIBRARY);
         let y = grid_priced + (o.kd_ray_ns - o.grid_ray_ns);
-        for i in 0..PRICES {
+        for i in 0..MAX_TERMS {
             b[i] += terms[i] * y;
-            for j in 0..PRICES {
+            for j in 0..MAX_TERMS {
                 a[i][j] += terms[i] * terms[j];
             }
         }
@@ -278,9 +275,12 @@ pub fn fit_check_prices(
 /// Solves `a·x = b` by Gaussian elimination with partial pivoting; `None` when singular.
 // Row operations read one row while writing another: indices say that most plainly.
 #[allow(clippy::needless_range_loop)]
-fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
-    for col in 0..N {
-        let pivot = (col..N).max_by(|&i, &j| {
+fn solve(
+    mut a: [[f64; MAX_TERMS]; MAX_TERMS],
+    mut b: [f64; MAX_TERMS],
+) -> Option<[f64; MAX_TERMS]> {
+    for col in 0..MAX_TERMS {
+        let pivot = (col..MAX_TERMS).max_by(|&i, &j| {
             a[i][col]
                 .abs()
                 .partial_cmp(&a[j][col].abs())
@@ -291,18 +291,18 @@ fn solve<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; 
         }
         a.swap(col, pivot);
         b.swap(col, pivot);
-        for row in col + 1..N {
+        for row in col + 1..MAX_TERMS {
             let f = a[row][col] / a[col][col];
-            for k in col..N {
+            for k in col..MAX_TERMS {
                 a[row][k] -= f * a[col][k];
             }
             b[row] -= f * b[col];
         }
     }
-    let mut x = [0.0; N];
-    for row in (0..N).rev() {
+    let mut x = [0.0; MAX_TERMS];
+    for row in (0..MAX_TERMS).rev() {
         let mut s = b[row];
-        for k in row + 1..N {
+        for k in row + 1..MAX_TERMS {
             s -= a[row][k] * x[k];
         }
         x[row] = s / a[row][row];
@@ -328,20 +328,13 @@ mod tests {
             tests: (tests * rays as f64) as u64,
             grid_references: (n as f64 * (1.5 + h)) as u64,
             grid_largest_cell: 0,
-            // 200 bytes a triangle: past the caches from 41 943 triangles on.
-            grid_bytes: 200 * n as u64,
         }
     }
 
     #[test]
     fn recovers_the_constants_of_a_model_it_can_express() {
-        let truth = Calibration::new(
-            0,
-            [
-                20.0, 50.0, 4.0, 30.0, 90.0, 7.0, 40.0, 2.0, 12.0, 15.0, 25.0,
-            ],
-        )
-        .unwrap();
+        let truth =
+            Calibration::new(0, [20.0, 50.0, 4.0, 30.0, 90.0, 7.0, 40.0, 2.0, 12.0]).unwrap();
         let obs: Vec<Observation> = [
             (1_000, 0.9, 10.0, 5.0),
             (20_000, 0.5, 40.0, 20.0),
@@ -396,9 +389,9 @@ mod tests {
         let got = fit(&obs, &Terms::ALL, 0).unwrap();
         assert!(got.values().iter().all(|&v| v >= 0.0), "{:?}", got.values());
         let mut only_intercept = Terms::ALL;
-        only_intercept.0[1] = [true, false, false, false];
+        only_intercept.0[1] = [true, false, false];
         let got = fit(&obs, &only_intercept, 0).unwrap();
-        assert_eq!((got.value(2), got.value(3), got.value(9)), (0.0, 0.0, 0.0));
+        assert_eq!((got.value(2), got.value(3)), (0.0, 0.0));
         assert!(got.value(1) > 0.0);
     }
 

@@ -184,7 +184,6 @@ pub fn observe_rays(
     let mut work = SceneFeatures {
         triangles: mesh.len() - mesh.degenerate_count(),
         grid_references: grid.reference_count() as u64,
-        grid_bytes: grid.memory_bytes() as u64,
         ..SceneFeatures::default()
     };
     for r in rays {

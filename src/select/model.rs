@@ -4,6 +4,8 @@
 //! calibration's constants. The fit ([`crate::select::fit`]) uses the same terms, so the model is
 //! defined once, here.
 
+use core::ops::Range;
+
 use super::calibration::Calibration;
 use super::decision::CostEstimate;
 use crate::math;
@@ -14,11 +16,6 @@ use crate::math;
 /// on engine_2cyl and sibenik (1–2 % of their triangles), and 2 318–227 012 on munich and the three
 /// stadiums (11–57 %).
 pub const HEAVY_CELL_MIN: u64 = 1024;
-
-/// The grid size from which the per-ray parts' memory term counts ([`SceneFeatures::memory_levels`]):
-/// 8 MiB, where the grid's time per ray began to exceed what its counted work predicts on the
-/// project's VMs (dragon_res2's 15 MiB 1.2×, bunny's 5 MiB 1.0×; docs/performance.md, "Stop 37").
-pub const CACHED_BYTES: u64 = 8 << 20;
 
 /// What the selector knows of a scene: its size, its grid's reference count, and what a set of rays
 /// did on the grid.
@@ -42,9 +39,6 @@ pub struct SceneFeatures {
     /// enters it test them all, and sample rays from afar rarely do (see
     /// [`SceneFeatures::has_heavy_cell`]).
     pub grid_largest_cell: u64,
-    /// Bytes the grid holds (0: not known): past the caches, a ray's cells and lists come from
-    /// memory (see [`SceneFeatures::memory_levels`]).
-    pub grid_bytes: u64,
 }
 
 impl SceneFeatures {
@@ -86,20 +80,6 @@ impl SceneFeatures {
         }
     }
 
-    /// How many times the grid's bytes double past [`CACHED_BYTES`] (0 below it, or when not
-    /// known): the memory term of the per-ray parts. Counted work does not see cache misses, and
-    /// past the caches both structures' rays slow down by a time per ray that grows with the
-    /// structure's size, not with the cells visited: stadium-1M (160 MiB) and sphereflake-1M (57
-    /// MiB) took 340 ns a ray more on the grid than their counts predict, at 1.9 and 11 cells a ray
-    /// (docs/performance.md, "Stop 37").
-    pub fn memory_levels(&self) -> f64 {
-        if self.grid_bytes <= CACHED_BYTES {
-            0.0
-        } else {
-            math::log2_64(self.grid_bytes as f64 / CACHED_BYTES as f64)
-        }
-    }
-
     /// `log2 N` (0 for N ≤ 1).
     pub fn log2_triangles(&self) -> f64 {
         math::log2_64(self.triangles.max(1) as f64)
@@ -115,20 +95,19 @@ impl SceneFeatures {
 }
 
 /// The most terms a part has.
-pub const MAX_TERMS: usize = 4;
+pub const MAX_TERMS: usize = 3;
 
 /// One predicted cost.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Part {
     /// Grid build: `c·N`.
     GridBuild,
-    /// Grid time per ray: `c₀ + c₁·cells + c₂·tests + c₃·m` (per ray, counted on the grid; `m`
-    /// the memory levels, [`SceneFeatures::memory_levels`]).
+    /// Grid time per ray: `c₀ + c₁·cells + c₂·tests` (per ray, counted on the grid).
     GridRay,
     /// kd-tree build: `N·log2 N·(c₀ + c₁·g)`, `g` the grid's references per triangle.
     KdBuild,
-    /// kd-tree time per ray: `c₀ + c₁·cells + c₂·tests + c₃·m`, priced on what the same rays did
-    /// on the grid (and the grid's memory levels): both structures' work grows with the geometry a ray passes near, so the estimate
+    /// kd-tree time per ray: `c₀ + c₁·cells + c₂·tests`, priced on what the same rays did on the
+    /// grid: both structures' work grows with the geometry a ray passes near, so the estimate
     /// follows the workload (a camera inside the scene, long or short rays) as the grid's does.
     KdRay,
 }
@@ -137,14 +116,13 @@ impl Part {
     /// Every part, in calibration order.
     pub const ALL: [Part; 4] = [Part::GridBuild, Part::GridRay, Part::KdBuild, Part::KdRay];
 
-    /// Which constants of the calibration are this part's coefficients, in term order (the
-    /// memory terms were appended to the blob's layout, so they come last).
-    pub fn constants(self) -> &'static [usize] {
+    /// Which constants of the calibration are this part's coefficients, in term order.
+    pub fn constants(self) -> Range<usize> {
         match self {
-            Part::GridBuild => &[0],
-            Part::GridRay => &[1, 2, 3, 9],
-            Part::KdBuild => &[4, 5],
-            Part::KdRay => &[6, 7, 8, 10],
+            Part::GridBuild => 0..1,
+            Part::GridRay => 1..4,
+            Part::KdBuild => 4..6,
+            Part::KdRay => 6..9,
         }
     }
 
@@ -152,14 +130,12 @@ impl Part {
     pub fn terms(self, f: &SceneFeatures) -> [f64; MAX_TERMS] {
         let n = f.triangles as f64;
         match self {
-            Part::GridBuild => [n, 0.0, 0.0, 0.0],
+            Part::GridBuild => [n, 0.0, 0.0],
             Part::KdBuild => {
                 let nlogn = n * f.log2_triangles();
-                [nlogn, nlogn * f.grid_references_per_triangle(), 0.0, 0.0]
+                [nlogn, nlogn * f.grid_references_per_triangle(), 0.0]
             }
-            Part::GridRay | Part::KdRay => {
-                [1.0, f.cells_per_ray(), f.tests_per_ray(), f.memory_levels()]
-            }
+            Part::GridRay | Part::KdRay => [1.0, f.cells_per_ray(), f.tests_per_ray()],
         }
     }
 
@@ -167,9 +143,8 @@ impl Part {
     pub fn predict(self, calibration: &Calibration, f: &SceneFeatures) -> f64 {
         let terms = self.terms(f);
         self.constants()
-            .iter()
             .zip(terms)
-            .map(|(&i, t)| calibration.value(i) * t)
+            .map(|(i, t)| calibration.value(i) * t)
             .sum()
     }
 }

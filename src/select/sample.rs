@@ -114,7 +114,6 @@ pub fn sample_grid(
     });
     f.grid_references = grid.reference_count() as u64;
     f.grid_largest_cell = grid.largest_cell() as u64;
-    f.grid_bytes = grid.memory_bytes() as u64;
     f
 }
 

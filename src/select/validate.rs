@@ -121,14 +121,12 @@ pub fn cross_validated_errors(
         .collect()
 }
 
-/// The terms of a variant: the grid's per-ray terms and the kd-tree's (fixed, cell, test), the
-/// kd-tree's build terms, and whether both per-ray parts take the memory term.
-const fn terms(grid: [bool; 3], kd_build: [bool; 2], kd_ray: [bool; 3], memory: bool) -> Terms {
+const fn terms(grid: [bool; 3], kd_build: [bool; 2], kd_ray: [bool; 3]) -> Terms {
     Terms([
-        [true, false, false, false],
-        [grid[0], grid[1], grid[2], memory],
-        [kd_build[0], kd_build[1], false, false],
-        [kd_ray[0], kd_ray[1], kd_ray[2], memory],
+        [true, false, false],
+        grid,
+        [kd_build[0], kd_build[1], false],
+        kd_ray,
     ])
 }
 
@@ -136,42 +134,28 @@ const ALL3: [bool; 3] = [true, true, true];
 
 /// The model variants compared, fewest terms first: a term stays only if it lowers the
 /// cross-validated error.
-pub const VARIANTS: [(&str, Terms); 7] = [
+pub const VARIANTS: [(&str, Terms); 6] = [
     (
         "kd ray constant",
-        terms(ALL3, [true, true], [true, false, false], false),
+        terms(ALL3, [true, true], [true, false, false]),
     ),
     (
         "grid tests only",
-        terms(
-            [false, false, true],
-            [true, true],
-            [false, false, true],
-            false,
-        ),
+        terms([false, false, true], [true, true], [false, false, true]),
     ),
     (
         "grid without cells",
-        terms(
-            [true, false, true],
-            [true, true],
-            [true, false, true],
-            false,
-        ),
+        terms([true, false, true], [true, true], [true, false, true]),
     ),
     (
         "kd ray without cells",
-        terms(ALL3, [true, true], [true, false, true], false),
+        terms(ALL3, [true, true], [true, false, true]),
     ),
     (
         "kd build without grid references",
-        terms(ALL3, [true, false], ALL3, false),
+        terms(ALL3, [true, false], ALL3),
     ),
-    (
-        "kd build without grid references, memory levels",
-        terms(ALL3, [true, false], ALL3, true),
-    ),
-    ("all terms", terms(ALL3, [true, true], ALL3, true)),
+    ("all terms", Terms::ALL),
 ];
 
 /// The variant with the lowest leave-one-out median W* error (ties to the earlier, smaller one),
