@@ -507,15 +507,12 @@ const GRID_X: Vec4 = Vec4::new(0.5, 1.5, 2.5, 3.5);
 fn grid_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
     let mut mask = 0xffff;
     for i in 0..3 {
-        let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
-        let (a, b) = (e[1] - s[1], s[0] - e[0]);
-        let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
-        let r = a.abs() * half[0] + b.abs() * half[1];
-        let (lo, hi) = (Vec4::splat(far.min(0.0) - r), Vec4::splat(far.max(0.0) + r));
+        let edge = edge_slab(p, i, half);
+        let (lo, hi) = (Vec4::splat(edge.lo), Vec4::splat(edge.hi));
         // `a·(x − s0) + b·(y − s1)` at the cell centres: the columns' terms in lanes, each row's
         // term splat from its lane (the same products as one expression per cell).
-        let cols = Vec4::splat(a) * (GRID_X - Vec4::splat(s[0]));
-        let rows = Vec4::splat(b) * (GRID_X - Vec4::splat(s[1]));
+        let [cols, rows] =
+            [0, 1].map(|k| Vec4::splat(edge.n[k]) * (GRID_X - Vec4::splat(edge.from[k])));
         let inside = |v: Vec4| (!(v.cmplt(lo) | v.cmpgt(hi))).bitmask();
         mask &= inside(cols + Vec4::splat(rows.x))
             | inside(cols + Vec4::splat(rows.y)) << 4
@@ -529,18 +526,8 @@ fn grid_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
 /// triangle's plane may cross (bit `i + 4j + 16k`): [`plane_mask`] on a larger block.
 #[inline(always)]
 fn grid_plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u64 {
-    let d = |i: usize| [0, 1, 2].map(|a| q[i][a] - q[0][a]);
-    let (e1, e2) = (d(1), d(2));
-    let n = [
-        e1[1] * e2[2] - e1[2] * e2[1],
-        e1[2] * e2[0] - e1[0] * e2[2],
-        e1[0] * e2[1] - e1[1] * e2[0],
-    ];
-    let dot = |v: [f32; 3]| n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
-    let (d1, d2) = (dot(e1), dot(e2));
-    let r = n[0].abs() * half[0] + n[1].abs() * half[1] + n[2].abs() * half[2];
-    let lo = Vec4::splat(d1.min(d2).min(0.0) - r);
-    let hi = Vec4::splat(d1.max(d2).max(0.0) + r);
+    let Slab { n, lo, hi, .. } = plane_slab(q, half);
+    let (lo, hi) = (Vec4::splat(lo), Vec4::splat(hi));
     let cols = Vec4::splat(n[0]) * (GRID_X - Vec4::splat(q[0][0]));
     let rows = Vec4::splat(n[1]) * (GRID_X - Vec4::splat(q[0][1]));
     let layers = Vec4::splat(n[2]) * (GRID_X - Vec4::splat(q[0][2]));
@@ -555,36 +542,37 @@ fn grid_plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u64 {
     layer(layers.x) | layer(layers.y) << 16 | layer(layers.z) << 32 | layer(layers.w) << 48
 }
 
-/// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
-const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
-const QUAD_Y: Vec4 = Vec4::new(0.5, 0.5, 1.5, 1.5);
-
-/// Which of the 2×2 cells centred at `(0.5 + i, 0.5 + j)`, `i, j ∈ {0, 1}`, of half extent
-/// `half` the projected triangle `p` may meet (bit `i + 2j`): each edge's normal separates the
-/// cells whose projection onto it misses the triangle's (the edge's vertices at 0, the opposite
-/// one at `far`, relative to the edge's first vertex). A NaN keeps the cell.
-#[inline(always)]
-fn quad_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
-    let mut mask = 0b1111;
-    for i in 0..3 {
-        let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
-        let (a, b) = (e[1] - s[1], s[0] - e[0]);
-        let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
-        let r = a.abs() * half[0] + b.abs() * half[1];
-        let (lo, hi) = (far.min(0.0) - r, far.max(0.0) + r);
-        let v = Vec4::splat(a) * (QUAD_X - Vec4::splat(s[0]))
-            + Vec4::splat(b) * (QUAD_Y - Vec4::splat(s[1]));
-        mask &= (!(v.cmplt(Vec4::splat(lo)) | v.cmpgt(Vec4::splat(hi)))).bitmask();
-    }
-    mask
+/// A separating axis of the masks: the cells whose centres `c` give `n·(c − from)` outside
+/// `[lo, hi]` are separated from the triangle.
+struct Slab<const D: usize> {
+    n: [f32; D],
+    from: [f32; D],
+    lo: f32,
+    hi: f32,
 }
 
-/// Which of the 2×2×2 cells centred at `(0.5 + i, 0.5 + j, 0.5 + k)` of half extent `half` the
-/// triangle's plane may cross (bit `i + 2j + 4k`): the normal `n`, computed, need not be exact —
-/// any axis separates when the projections miss — so all three vertices are projected onto it
-/// (`0`, `d1`, `d2` relative to `q0`). A NaN keeps the cell.
+/// Edge `i` of the projected triangle `p` (from vertex `i` to `i + 1`) against cells of half
+/// extent `half`: its normal, and the triangle's projection onto it (the edge's vertices at 0, the
+/// opposite one at `far`, relative to the edge's first vertex) widened by a cell's.
 #[inline(always)]
-fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
+fn edge_slab(p: [[f32; 2]; 3], i: usize, half: [f32; 2]) -> Slab<2> {
+    let (s, e, o) = (p[i], p[(i + 1) % 3], p[(i + 2) % 3]);
+    let (a, b) = (e[1] - s[1], s[0] - e[0]);
+    let far = a * (o[0] - s[0]) + b * (o[1] - s[1]);
+    let r = a.abs() * half[0] + b.abs() * half[1];
+    Slab {
+        n: [a, b],
+        from: s,
+        lo: far.min(0.0) - r,
+        hi: far.max(0.0) + r,
+    }
+}
+
+/// The triangle's plane against cells of half extent `half`: the normal `n`, computed, need not be
+/// exact — any axis separates when the projections miss — so all three vertices are projected onto
+/// it (`0`, `d1`, `d2` relative to `q0`), widened by a cell's projection.
+#[inline(always)]
+fn plane_slab(q: &[[f32; 3]; 3], half: [f32; 3]) -> Slab<3> {
     let d = |i: usize| [0, 1, 2].map(|a| q[i][a] - q[0][a]);
     let (e1, e2) = (d(1), d(2));
     let n = [
@@ -595,8 +583,44 @@ fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
     let dot = |v: [f32; 3]| n[0] * v[0] + n[1] * v[1] + n[2] * v[2];
     let (d1, d2) = (dot(e1), dot(e2));
     let r = n[0].abs() * half[0] + n[1].abs() * half[1] + n[2].abs() * half[2];
-    let lo = Vec4::splat(d1.min(d2).min(0.0) - r);
-    let hi = Vec4::splat(d1.max(d2).max(0.0) + r);
+    Slab {
+        n,
+        from: q[0],
+        lo: d1.min(d2).min(0.0) - r,
+        hi: d1.max(d2).max(0.0) + r,
+    }
+}
+
+/// The centres of the 2×2 cells of [`quad_mask`], on the first and the second axis.
+const QUAD_X: Vec4 = Vec4::new(0.5, 1.5, 0.5, 1.5);
+const QUAD_Y: Vec4 = Vec4::new(0.5, 0.5, 1.5, 1.5);
+
+/// Which of the 2×2 cells centred at `(0.5 + i, 0.5 + j)`, `i, j ∈ {0, 1}`, of half extent
+/// `half` the projected triangle `p` may meet (bit `i + 2j`): each edge's normal separates the
+/// cells whose projection onto it misses the triangle's ([`edge_slab`]). A NaN keeps the cell.
+#[inline(always)]
+fn quad_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
+    let mut mask = 0b1111;
+    for i in 0..3 {
+        let Slab {
+            n: [a, b],
+            from: s,
+            lo,
+            hi,
+        } = edge_slab(p, i, half);
+        let v = Vec4::splat(a) * (QUAD_X - Vec4::splat(s[0]))
+            + Vec4::splat(b) * (QUAD_Y - Vec4::splat(s[1]));
+        mask &= (!(v.cmplt(Vec4::splat(lo)) | v.cmpgt(Vec4::splat(hi)))).bitmask();
+    }
+    mask
+}
+
+/// Which of the 2×2×2 cells centred at `(0.5 + i, 0.5 + j, 0.5 + k)` of half extent `half` the
+/// triangle's plane may cross (bit `i + 2j + 4k`; [`plane_slab`]). A NaN keeps the cell.
+#[inline(always)]
+fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
+    let Slab { n, lo, hi, .. } = plane_slab(q, half);
+    let (lo, hi) = (Vec4::splat(lo), Vec4::splat(hi));
     let v = Vec4::splat(n[0]) * (QUAD_X - Vec4::splat(q[0][0]))
         + Vec4::splat(n[1]) * (QUAD_Y - Vec4::splat(q[0][1]));
     let mut mask = 0;
