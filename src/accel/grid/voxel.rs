@@ -25,7 +25,7 @@ use super::layout::Shape;
 
 /// Relative widening of the enlarged cell (in cell units), covering the rounding of the tests
 /// (docs/design.md: below 2^-17 of a constraint's width in f64 for grids of up to 2^32 cells per
-/// axis, below 12·2^-24 in the f32 masks).
+/// axis, below 12·2^-24 in the 2×2×2 f32 masks and 24·2^-24 in the 4×4×4 ones).
 const ROUNDING_SLACK: f64 = 1.0 + 1.0 / 1024.0;
 
 /// What insertion needs of the grid's shape: the footprint in f32, the tests in f64 cell units.
@@ -280,7 +280,7 @@ impl Cells {
         let q = tri.map(|p| [0, 1, 2].map(|a| (self.local(p[a], a) - f64::from(fp.lo[a])) as f32));
         let half = self.half.map(|h| h as f32);
         let grid = |x: usize, y: usize| grid_mask(q.map(|v| [v[x], v[y]]), [half[x], half[y]]);
-        // Each projection's 16 bits spread over the third axis: (x, y) over k, (z, x) (bits i +
+        // Each projection's 16 bits spread over the third axis: (x, y) over k, (x, z) (bits i +
         // 4k) over j, (y, z) (bits j + 4k) over i.
         let over_k = |m: u32| u64::from(m) * LAYERS[3];
         let over_j = |m: u32| {
