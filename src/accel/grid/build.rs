@@ -276,6 +276,29 @@ fn keep_cells(
                 len += CELL_COUNT[m] as usize;
             }
             Overlap::Large(fp) => {
+                if let Some((base, mut mask)) = cells.medium_cells(tri, &fp, exact) {
+                    // At most 64 cells, counted: make room for them first (one growth makes room
+                    // for at least 64), then store without a check per cell.
+                    if kept.room() - len < mask.count_ones() as usize {
+                        if let Err(e) = kept.grow(len, (i + 1, n), budget) {
+                            failed = Some(e);
+                            break;
+                        }
+                    }
+                    debug_assert!(kept.room() - len >= mask.count_ones() as usize);
+                    let (out, ids) = (kept.cells.as_mut_ptr(), kept.prims.as_mut_ptr());
+                    while mask != 0 {
+                        let bit = mask.trailing_zeros() as usize;
+                        mask &= mask - 1;
+                        // SAFETY: one of the mask's cells, each below both capacities (above).
+                        unsafe {
+                            out.add(len).write(cells.medium_cell(base, bit) as u32);
+                            ids.add(len).write(prim as u32);
+                        }
+                        len += 1;
+                    }
+                    continue;
+                }
                 // As above, through raw pointers up to `len`, the room checked per cell (a long
                 // triangle's cells are many, and two checked pushes each cost twice as much).
                 cells.for_each_large(tri, &fp, exact, &mut |cell| {

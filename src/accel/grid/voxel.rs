@@ -243,34 +243,54 @@ impl Cells {
         exact: bool,
         emit: &mut impl FnMut(u32),
     ) {
-        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
-        if !exact || thick.iter().filter(|&&t| t).count() < 2 {
-            self.for_box(fp, emit);
-        } else if (0..3).all(|a| fp.len(a) <= MEDIUM_CELLS) {
-            let mut mask = self.medium(tri, fp, thick);
-            let base = self.index(fp.lo);
+        if let Some((base, mut mask)) = self.medium_cells(tri, fp, exact) {
             while mask != 0 {
                 let bit = mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                // `stride[0]` is 1.
-                let cell = base
-                    + (bit & 3)
-                    + ((bit >> 2) & 3) * self.stride[1]
-                    + (bit >> 4) * self.stride[2];
-                emit(cell as u32);
+                emit(self.medium_cell(base, bit) as u32);
             }
+            return;
+        }
+        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
+        if !exact || thick.iter().filter(|&&t| t).count() < 2 {
+            self.for_box(fp, emit);
         } else {
             let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
             self.overlapped(&q, fp, thick, emit);
         }
     }
 
+    /// For a footprint of at most [`MEDIUM_CELLS`] cells an axis, more than one on two or three
+    /// axes, and `exact`: the flat index of its corner and the mask of the cells the triangle
+    /// overlaps ([`Cells::medium`]; [`Cells::medium_cell`] turns a bit into a cell). `None` for
+    /// the other footprints, which [`Cells::for_each_large`] lists by rows or whole.
+    #[inline(always)]
+    pub fn medium_cells(
+        &self,
+        tri: &[Vec3; 3],
+        fp: &Footprint,
+        exact: bool,
+    ) -> Option<(usize, u64)> {
+        let thick = [0, 1, 2].map(|a| fp.hi[a] > fp.lo[a]);
+        let medium = exact
+            && thick.iter().filter(|&&t| t).count() >= 2
+            && (0..3).all(|a| fp.len(a) <= MEDIUM_CELLS);
+        medium.then(|| (self.index(fp.lo), self.medium(tri, fp, thick)))
+    }
+
+    /// The cell of bit `bit` (`< 64`) of a [`Cells::medium_cells`] mask whose corner is `base`.
+    #[inline(always)]
+    pub fn medium_cell(&self, base: usize, bit: usize) -> usize {
+        // `stride[0]` is 1.
+        base + (bit & 3) + ((bit >> 2) & 3) * self.stride[1] + ((bit >> 4) & 3) * self.stride[2]
+    }
+
     /// The cells a triangle overlaps among those of a footprint of at most [`MEDIUM_CELLS`] cells
     /// per axis, two or more on two or three axes (`thick`), as bits `i + 4j + 16k` (the cell `i,
     /// j, k` up from the footprint's corner): [`Cells::small`]'s tests on a 4×4×4 block, each
-    /// projection's edges as a mask of its 4×4 cells, four at a time, and the plane. A strand of
-    /// hair crossing a few cells takes ~4× fewer instructions so than by rows
-    /// ([`Cells::overlapped`]; docs/performance.md, "Stop 37").
+    /// projection's edges as a mask of its 4×4 cells, four at a time, and the plane: on hair-50k
+    /// 793 instructions a footprint, against 1 257 by rows ([`Cells::overlapped`];
+    /// docs/performance.md, "Stop 37").
     ///
     /// In f32, in cell units from the footprint's corner (values below `4 + 2·margin`): the
     /// roundings of each test are below `24u` of its width (twice `small`'s bound, for twice the
