@@ -546,11 +546,10 @@ fn grid_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
 /// triangle's plane may cross (bit `i + 4j + 16k`): [`plane_mask`] on a larger block.
 #[inline(always)]
 fn grid_plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u64 {
-    let Slab { n, lo, hi, .. } = plane_slab(q, half);
-    let (lo, hi) = (Vec4::splat(lo), Vec4::splat(hi));
-    let cols = Vec4::splat(n[0]) * (GRID_X - Vec4::splat(q[0][0]));
-    let rows = Vec4::splat(n[1]) * (GRID_X - Vec4::splat(q[0][1]));
-    let layers = Vec4::splat(n[2]) * (GRID_X - Vec4::splat(q[0][2]));
+    let plane = plane_slab(q, half);
+    let (lo, hi) = (Vec4::splat(plane.lo), Vec4::splat(plane.hi));
+    let [cols, rows, layers] =
+        [0, 1, 2].map(|a| Vec4::splat(plane.n[a]) * (GRID_X - Vec4::splat(plane.from[a])));
     let inside = |v: Vec4| u64::from((!(v.cmplt(lo) | v.cmpgt(hi))).bitmask());
     let layer = |z: f32| {
         let yz = rows + Vec4::splat(z);
@@ -639,13 +638,13 @@ fn quad_mask(p: [[f32; 2]; 3], half: [f32; 2]) -> u32 {
 /// triangle's plane may cross (bit `i + 2j + 4k`; [`plane_slab`]). A NaN keeps the cell.
 #[inline(always)]
 fn plane_mask(q: &[[f32; 3]; 3], half: [f32; 3]) -> u32 {
-    let Slab { n, lo, hi, .. } = plane_slab(q, half);
+    let Slab { n, from, lo, hi } = plane_slab(q, half);
     let (lo, hi) = (Vec4::splat(lo), Vec4::splat(hi));
-    let v = Vec4::splat(n[0]) * (QUAD_X - Vec4::splat(q[0][0]))
-        + Vec4::splat(n[1]) * (QUAD_Y - Vec4::splat(q[0][1]));
+    let v = Vec4::splat(n[0]) * (QUAD_X - Vec4::splat(from[0]))
+        + Vec4::splat(n[1]) * (QUAD_Y - Vec4::splat(from[1]));
     let mut mask = 0;
     for (k, cz) in [0.5f32, 1.5].into_iter().enumerate() {
-        let w = v + Vec4::splat(n[2] * (cz - q[0][2]));
+        let w = v + Vec4::splat(n[2] * (cz - from[2]));
         mask |= (!(w.cmplt(lo) | w.cmpgt(hi))).bitmask() << (4 * k);
     }
     mask
