@@ -5,7 +5,7 @@
 //! the triangle is referenced by a leaf whose closed box holds `P` (clipping rounds outward). The
 //! hit's reported `t` is within half an ulp of the exact one, so it is enough that every node's
 //! interval holds the exact split crossings widened by a few ulps. At the root the box's crossings
-//! are computed and widened by 8 ulps (`widened`). At a split, `t = (s − o)/d` is bracketed by
+//! are computed and widened by 8 ulps (`slack`). At a split, `t = (s − o)/d` is bracketed by
 //! the two products of `fl(s − o)` with `1/d` rounded and scaled by `1 ± 2^-20` (16 ulps, once per
 //! ray): four roundings of relative size `2^-24` each leave the larger product at least 11 ulps
 //! beyond the exact `t` and the smaller one as far below (or infinite, if a product overflows:
@@ -19,6 +19,7 @@ use crate::accel::{test_refs, Mailbox, Refs};
 use crate::mesh::TriMesh;
 use crate::ray::{Aabb, Hit, Ray};
 use crate::triangle::{TriangleLoop, TriangleTest};
+use glam::Vec3A;
 
 /// Room for one pending far child per level of the deepest tree.
 const STACK_SIZE: usize = MAX_DEPTH as usize + 4;
@@ -30,14 +31,12 @@ const T_SLACK: f32 = 8.0 * f32::EPSILON;
 /// (whose relative error is then not bounded by `T_SLACK`).
 const T_FLOOR: f32 = 5.6e-45;
 
-/// `t` widened by its rounding slack: `(t − w, t + w)`. An infinite `t` stays infinite (the slack is
-/// capped at `f32::MAX`, so `−∞ + w` is not NaN); a NaN stays NaN, which the callers read as "no
-/// constraint".
+/// The rounding slack of computed `t`s, per lane: `|t|·T_SLACK + T_FLOOR`, capped at `f32::MAX` so
+/// that an infinite `t` stays infinite when widened (`−∞ + w` is not NaN); a NaN stays NaN.
 #[inline(always)]
-fn widened(t: f32) -> (f32, f32) {
-    let w = t.abs() * T_SLACK + T_FLOOR;
-    let w = if w < f32::MAX { w } else { f32::MAX };
-    (t - w, t + w)
+fn slack(t: Vec3A) -> Vec3A {
+    let w = t.abs() * T_SLACK + Vec3A::splat(T_FLOOR);
+    Vec3A::select(w.cmplt(Vec3A::splat(f32::MAX)), w, Vec3A::splat(f32::MAX))
 }
 
 /// Relative slack of the split crossings' brackets: `2^-20` (16 ulps of f32), exact in `1 ± SLACK`.
@@ -92,39 +91,49 @@ impl Clip {
         if bounds.is_empty() {
             return None;
         }
-        let (o, d) = (ray.org, ray.dir);
+        // The three axes at once (the fourth lane unused): per lane the same IEEE operations as
+        // one axis alone, and the SSE `min`/`max` meet no NaN where it matters — a bounded
+        // inverse times a finite difference is finite, and the other lanes are replaced before
+        // they are compared (a ray with a non-finite origin is refused after, whatever its clip).
+        let (o, d) = (Vec3A::from(ray.org), Vec3A::from(ray.dir));
+        let (lo, hi) = (Vec3A::from(bounds.min), Vec3A::from(bounds.max));
+        let zero = d.cmpeq(Vec3A::ZERO);
+        // The box is the triangles' exact bounds: a ray parallel to a slab it is outside of
+        // misses them all.
+        if (zero & (o.cmplt(lo) | o.cmpgt(hi))).any() {
+            return None;
+        }
+        let inv = Vec3A::ONE / d;
+        let magnitude = inv.abs();
+        let bounded =
+            magnitude.cmplt(Vec3A::INFINITY) & magnitude.cmpge(Vec3A::splat(f32::MIN_POSITIVE));
+        let inv = Vec3A::select(bounded | zero, inv, Vec3A::NAN);
+        let (ta, tb) = ((lo - o) * inv, (hi - o) * inv);
+        let (near, far) = (ta.min(tb), ta.max(tb));
+        let near = near - slack(near);
+        let far = far + slack(far);
+        let near = Vec3A::select(bounded, near, Vec3A::NEG_INFINITY).max_element();
+        let far = Vec3A::select(bounded, far, Vec3A::INFINITY).min_element();
+        let t0 = if near > ray.tmin { near } else { ray.tmin };
+        let t1 = if far < ray.tmax { far } else { ray.tmax };
+        if !(t0 <= t1) {
+            return None;
+        }
+        let org = o.to_array();
+        let dn = (inv * (1.0 - SPLIT_SLACK)).to_array();
+        let up = (inv * (1.0 + SPLIT_SLACK)).to_array();
+        let signs = d.is_negative_bitmask();
         let mut axes = [AxisRay::default(); 4];
-        let (mut t0, mut t1) = (ray.tmin, ray.tmax);
-        let (lo, hi) = (bounds.min, bounds.max);
-        for a in 0..3 {
-            let down = u32::from(d[a].is_sign_negative());
-            let mut inv = 1.0 / d[a];
-            if d[a] == 0.0 {
-                // The box is the triangles' exact bounds: a ray outside its slab misses them all.
-                if o[a] < lo[a] || o[a] > hi[a] {
-                    return None;
-                }
-            } else if !(inv.is_finite() && inv.abs() >= f32::MIN_POSITIVE) {
-                inv = f32::NAN;
-            } else {
-                let (ta, tb) = ((lo[a] - o[a]) * inv, (hi[a] - o[a]) * inv);
-                let (near, far) = if ta < tb { (ta, tb) } else { (tb, ta) };
-                let (near, _) = widened(near);
-                let (_, far) = widened(far);
-                t0 = if near > t0 { near } else { t0 };
-                t1 = if far < t1 { far } else { t1 };
-            }
-            axes[a] = AxisRay {
-                org: o[a],
-                inv_dn: inv * (1.0 - SPLIT_SLACK),
-                inv_up: inv * (1.0 + SPLIT_SLACK),
+        for (a, axis) in axes.iter_mut().take(3).enumerate() {
+            let down = (signs >> a) & 1;
+            *axis = AxisRay {
+                org: org[a],
+                inv_dn: dn[a],
+                inv_up: up[a],
                 near: down,
                 near_empty: EMPTY_BELOW << down,
                 far_empty: EMPTY_ABOVE >> down,
             };
-        }
-        if !(t0 <= t1) {
-            return None;
         }
         Some(Clip { axes, t0, t1 })
     }
