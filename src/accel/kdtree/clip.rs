@@ -260,27 +260,34 @@ fn split_bounds_on<const A: usize>(tri: &[Vec3; 3], part: &Aabb, pos: f32) -> (A
             }
         }
     }
-    let side = |s: usize| {
-        let (lo, hi) = (Vec3::from(lo[s]), Vec3::from(hi[s]));
-        if !(lo.x <= hi.x) {
-            return Aabb::EMPTY;
-        }
-        let mut b = Aabb {
-            min: lo.max(part.min),
-            max: hi.min(part.max),
-        };
-        if s == 0 {
-            b.max[A] = b.max[A].min(pos);
-        } else {
-            b.min[A] = b.min[A].max(pos);
-        }
-        if b.is_empty() {
-            Aabb::EMPTY
-        } else {
-            b
-        }
+    (
+        side_bounds(lo[0].into(), hi[0].into(), part, A, pos, false),
+        side_bounds(lo[1].into(), hi[1].into(), part, A, pos, true),
+    )
+}
+
+/// One side's box from the bounds of its vertices and crossings (`lo > hi` when it has none):
+/// intersected with the node's part and with its half-space of the plane `x[axis] = pos` (the
+/// upper one when `upper`), or [`Aabb::EMPTY`].
+#[inline(always)]
+fn side_bounds(lo: Vec3, hi: Vec3, part: &Aabb, axis: usize, pos: f32, upper: bool) -> Aabb {
+    if !(lo.x <= hi.x) {
+        return Aabb::EMPTY;
+    }
+    let mut b = Aabb {
+        min: lo.max(part.min),
+        max: hi.min(part.max),
     };
-    (side(0), side(1))
+    if upper {
+        b.min[axis] = b.min[axis].max(pos);
+    } else {
+        b.max[axis] = b.max[axis].min(pos);
+    }
+    if b.is_empty() {
+        Aabb::EMPTY
+    } else {
+        b
+    }
 }
 
 /// The version with the axis chosen at run time, kept as the reference the tests hold
@@ -327,25 +334,7 @@ fn split_bounds_ref(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) -> (Aab
             add(lo1, hi1, &xl, &xh);
         }
     }
-    let side = |s: usize| {
-        if !(lo[s][0] <= hi[s][0]) {
-            return Aabb::EMPTY;
-        }
-        let mut b = Aabb {
-            min: Vec3::from(lo[s]).max(part.min),
-            max: Vec3::from(hi[s]).min(part.max),
-        };
-        if s == 0 {
-            b.max[axis] = b.max[axis].min(pos);
-        } else {
-            b.min[axis] = b.min[axis].max(pos);
-        }
-        if b.is_empty() {
-            Aabb::EMPTY
-        } else {
-            b
-        }
-    };
+    let side = |s: usize| side_bounds(lo[s].into(), hi[s].into(), part, axis, pos, s == 1);
     (side(0), side(1))
 }
 
