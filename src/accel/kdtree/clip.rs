@@ -497,12 +497,13 @@ mod tests {
             let mut tri = [rng.next_vec3(), rng.next_vec3(), rng.next_vec3()]
                 .map(|v| (v * 2.0 - Vec3::ONE) * scale);
             let axis = rng.below(3);
-            // Some triangles with an edge parallel to the plane or a vertex at -0.
+            // Some triangles with an edge parallel to the plane or a vertex at -0 (any of the
+            // three, so that a crossing meets a stored -0 bound).
             if case % 7 == 0 {
                 tri[1][axis] = tri[0][axis];
             }
             if case % 11 == 0 {
-                tri[2][axis] = -0.0;
+                tri[case % 3][axis] = -0.0;
             }
             let node = Aabb::of_triangle(&tri);
             let pos = match case % 4 {

@@ -93,8 +93,9 @@ impl Clip {
         }
         // The three axes at once (the fourth lane unused): per lane the same IEEE operations as
         // one axis alone, and the SSE `min`/`max` meet no NaN where it matters — a bounded
-        // inverse times a finite difference is finite, and the other lanes are replaced before
-        // they are compared (a ray with a non-finite origin is refused after, whatever its clip).
+        // inverse times a finite difference is never NaN (at most ±∞ where the difference
+        // overflows), and the other lanes are replaced before they are compared (a ray with a
+        // non-finite origin is refused after, whatever its clip).
         let (o, d) = (Vec3A::from(ray.org), Vec3A::from(ray.dir));
         let (lo, hi) = (Vec3A::from(bounds.min), Vec3A::from(bounds.max));
         let zero = d.cmpeq(Vec3A::ZERO);
