@@ -334,6 +334,25 @@ fn time_both(
     (median(kd), median(gr))
 }
 
+/// Embree 3 MEDIUM's `rtcIntersect1` on `rays` (seconds, median of `reps`), or `None` when
+/// Embree cannot build the scene.
+#[cfg(feature = "peers")]
+fn embree_medium_seconds(data: &MeshData, rays: &[Ray], reps: usize) -> Option<f64> {
+    let device = peer_structures::EmbreeDevice::new().ok()?;
+    let built = peer_structures::Kind::Embree(
+        peer_structures::embree3::RTC_BUILD_QUALITY_MEDIUM,
+    )
+    .build(data, Some(&device))
+    .ok()?;
+    let mut t = Vec::new();
+    for _ in 0..reps {
+        let t0 = Instant::now();
+        std::hint::black_box(built.count_hits(rays));
+        t.push(t0.elapsed().as_secs_f64());
+    }
+    Some(median(t))
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let (Some(mode), Some(reps)) = (
@@ -462,12 +481,17 @@ fn main() {
             ),
             "time" => {
                 let (kd, gr) = time_both(&tree, &grid, &mesh, &rays, reps);
-                println!(
+                print!(
                     "{name:>16} N {:>8} kd {:7.1} ns/ray grid {:7.1} ns/ray",
                     mesh.len(),
                     kd * 1e9 / n,
                     gr * 1e9 / n
                 );
+                #[cfg(feature = "peers")]
+                if let Some(e) = embree_medium_seconds(&data, &rays, reps) {
+                    print!(" Embree MEDIUM {:7.1} ns/ray", e * 1e9 / n);
+                }
+                println!();
             }
             "check" => {
                 use rayq::select::decision::kd_tree_confirmed;
