@@ -3,7 +3,8 @@
 //! both, or prints what a ray does in each.
 //!
 //!     cargo build --release --example raycost
-//!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7
+//!     target/release/examples/raycost time 7 bunny hair-50k      # ns per ray, medians of 7 (with
+//!                                                                 # --features peers, Embree MEDIUM's too)
 //!     target/release/examples/raycost stats 1 bunny               # nodes, leaves, cells, tests
 //!     target/release/examples/raycost check 1 bunny               # the selector's check after a kd build
 //!     target/release/examples/raycost build 9 bunny               # mesh copy + grid build
@@ -339,11 +340,9 @@ fn time_both(
 #[cfg(feature = "peers")]
 fn embree_medium_seconds(data: &MeshData, rays: &[Ray], reps: usize) -> Option<f64> {
     let device = peer_structures::EmbreeDevice::new().ok()?;
-    let built = peer_structures::Kind::Embree(
-        peer_structures::embree3::RTC_BUILD_QUALITY_MEDIUM,
-    )
-    .build(data, Some(&device))
-    .ok()?;
+    let built = peer_structures::Kind::Embree(peer_structures::embree3::RTC_BUILD_QUALITY_MEDIUM)
+        .build(data, Some(&device))
+        .ok()?;
     let mut t = Vec::new();
     for _ in 0..reps {
         let t0 = Instant::now();
