@@ -224,7 +224,6 @@ pub(super) fn split_bounds(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) 
 #[inline(always)]
 fn split_bounds_on<const A: usize>(tri: &[Vec3; 3], part: &Aabb, pos: f32) -> (Aabb, Aabb) {
     let v = tri.map(|v| v.to_array());
-    let (b1, b2) = ((A + 1) % 3, (A + 2) % 3);
     // Each side's bounds in lanes. On x86-64 `min`/`max` are the SSE ones, `q < lo ? q : lo` and
     // `q > hi ? q : hi`: the comparisons a scalar version makes, so the same bounds bit for bit
     // (elsewhere the same values, but for the sign of a zero bound; nothing here is NaN).
@@ -240,21 +239,7 @@ fn split_bounds_on<const A: usize>(tri: &[Vec3; 3], part: &Aabb, pos: f32) -> (A
             (lo[1], hi[1]) = (p.min(lo[1]), p.max(hi[1]));
         }
         if (a[A] < pos) != (b[A] < pos) && a[A] != pos && b[A] != pos {
-            let (a, b) = (a.map(f64::from), b.map(f64::from));
-            let t = (f64::from(pos) - a[A]) / (b[A] - a[A]);
-            let (mut xl, mut xh) = ([pos; 3], [pos; 3]);
-            for k in [b1, b2] {
-                let x = a[k] + (b[k] - a[k]) * t;
-                // The f64 crossing is off by at most about 6u·(|a_k| + |b_k|) (u = 2^-53: one
-                // rounding each in the three differences, the quotient, the product and the sum,
-                // with t in [0, 1]), and `x ± err` rounds once more; widened by 16u before
-                // rounding outward. Without it a crossing far smaller than the vertices (a plane
-                // at 1e-21 through a unit triangle) lost a sliver of its part: a fuzzing helper's
-                // finding.
-                let err = 8.0 * f64::EPSILON * (a[k].abs() + b[k].abs());
-                xl[k] = round_down(x - err);
-                xh[k] = round_up(x + err);
-            }
+            let (xl, xh) = crossing(a, b, A, pos);
             let (ql, qh) = (Vec3A::from(xl), Vec3A::from(xh));
             for s in 0..2 {
                 (lo[s], hi[s]) = (ql.min(lo[s]), qh.max(hi[s]));
@@ -265,6 +250,28 @@ fn split_bounds_on<const A: usize>(tri: &[Vec3; 3], part: &Aabb, pos: f32) -> (A
         side_bounds(lo[0].into(), hi[0].into(), part, A, pos, false),
         side_bounds(lo[1].into(), hi[1].into(), part, A, pos, true),
     )
+}
+
+/// Where the edge `a`–`b`, which crosses the plane `x[axis] = pos` strictly between its ends,
+/// meets it: the crossing's bounds rounded outward to f32 (`pos` itself on `axis`). With `axis` a
+/// constant of the caller, the two other axes are fixed slots.
+#[inline(always)]
+fn crossing(a: &[f32; 3], b: &[f32; 3], axis: usize, pos: f32) -> ([f32; 3], [f32; 3]) {
+    let (a, b) = (a.map(f64::from), b.map(f64::from));
+    let t = (f64::from(pos) - a[axis]) / (b[axis] - a[axis]);
+    let (mut xl, mut xh) = ([pos; 3], [pos; 3]);
+    for k in [(axis + 1) % 3, (axis + 2) % 3] {
+        let x = a[k] + (b[k] - a[k]) * t;
+        // The f64 crossing is off by at most about 6u·(|a_k| + |b_k|) (u = 2^-53: one rounding
+        // each in the three differences, the quotient, the product and the sum, with t in
+        // [0, 1]), and `x ± err` rounds once more; widened by 16u before rounding outward.
+        // Without it a crossing far smaller than the vertices (a plane at 1e-21 through a unit
+        // triangle) lost a sliver of its part: a fuzzing helper's finding.
+        let err = 8.0 * f64::EPSILON * (a[k].abs() + b[k].abs());
+        xl[k] = round_down(x - err);
+        xh[k] = round_up(x + err);
+    }
+    (xl, xh)
 }
 
 /// One side's box from the bounds of its vertices and crossings (`lo > hi` when it has none):
@@ -314,23 +321,7 @@ fn split_bounds_ref(tri: &[Vec3; 3], part: &Aabb, axis: usize, pos: f32) -> (Aab
             add(lo1, hi1, a, a);
         }
         if (a[axis] < pos) != (b[axis] < pos) && a[axis] != pos && b[axis] != pos {
-            let (a, b) = (a.map(f64::from), b.map(f64::from));
-            let t = (f64::from(pos) - a[axis]) / (b[axis] - a[axis]);
-            let (mut xl, mut xh) = ([pos; 3], [pos; 3]);
-            for k in 0..3 {
-                if k != axis {
-                    let x = a[k] + (b[k] - a[k]) * t;
-                    // The f64 crossing is off by at most about 6u·(|a_k| + |b_k|) (u = 2^-53: one
-                    // rounding each in the three differences, the quotient, the product and the
-                    // sum, with t in [0, 1]), and `x ± err` rounds once more; widened by 16u before
-                    // rounding outward. Without it a crossing far smaller than the vertices (a
-                    // plane at 1e-21 through a unit triangle) lost a sliver of its part: a fuzzing
-                    // helper's finding.
-                    let err = 8.0 * f64::EPSILON * (a[k].abs() + b[k].abs());
-                    xl[k] = round_down(x - err);
-                    xh[k] = round_up(x + err);
-                }
-            }
+            let (xl, xh) = crossing(a, b, axis, pos);
             add(lo0, hi0, &xl, &xh);
             add(lo1, hi1, &xl, &xh);
         }
