@@ -22,6 +22,9 @@
 use glam::{Vec3, Vec3A, Vec4};
 
 use super::layout::Shape;
+use slabs::{is_thin, MAX_SLAB_CELLS};
+
+mod slabs;
 
 /// Relative widening of the enlarged cell (in cell units), covering the rounding of the tests
 /// (docs/design.md: below 2^-17 of a constraint's width in f64 for grids of up to 2^32 cells per
@@ -256,7 +259,20 @@ impl Cells {
             self.for_box(fp, emit);
         } else {
             let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
-            self.overlapped(&q, fp, thick, emit);
+            // Slabs across the triangle's longest extent: its long edge then moves at most a cell
+            // across a slab on the other axes.
+            let extent = [0, 1, 2].map(|a| {
+                let (lo, hi) = (
+                    q[0][a].min(q[1][a]).min(q[2][a]),
+                    q[0][a].max(q[1][a]).max(q[2][a]),
+                );
+                hi - lo
+            });
+            if thick == [true; 3] && (0..3).all(|a| fp.len(a) <= MAX_SLAB_CELLS) && is_thin(&q) {
+                self.slabs(&q, fp, largest_axis(extent), emit);
+            } else {
+                self.overlapped(&q, fp, thick, emit);
+            }
         }
     }
 
