@@ -4,6 +4,7 @@
 use alloc::vec::Vec;
 use glam::Vec3;
 
+use super::layout::Shape;
 use super::voxel::Cells;
 use super::*;
 use crate::accel::brute::BruteForce;
@@ -50,6 +51,67 @@ fn sat_overlaps(tri: &[Vec3; 3], lo: [f64; 3], hi: [f64; 3]) -> bool {
         let (min, max) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
         !(min > r || max < -r)
     })
+}
+
+/// Checks the cells `listed` (sorted) for a triangle of a grid of shape `shape` against the
+/// oracle, on every cell within two of its bounds: each cell whose box enlarged by the margin the
+/// triangle meets is listed, and each cell listed is met within the margin plus the rounding slack
+/// (1/512 of a cell). Returns the cells the triangle meets.
+pub(super) fn assert_listed_exactly(
+    shape: &Shape,
+    cells: &Cells,
+    tri: &[Vec3; 3],
+    listed: &[usize],
+    what: &str,
+) -> usize {
+    let res = shape.res;
+    let plane = |a: usize, k: u32| {
+        f64::from(shape.bounds.min[a]) + f64::from(k) * f64::from(shape.cell_size[a])
+    };
+    let b = Aabb::of_triangle(tri);
+    let range = |a: usize| {
+        let f = |x: f32| {
+            ((f64::from(x) - f64::from(shape.bounds.min[a])) / f64::from(shape.cell_size[a]))
+                .max(0.0) as u32
+        };
+        (
+            f(b.min[a]).saturating_sub(2),
+            (f(b.max[a]) + 2).min(res[a] - 1),
+        )
+    };
+    let (rx, ry, rz) = (range(0), range(1), range(2));
+    let mut want = 0usize;
+    for z in rz.0..=rz.1 {
+        for y in ry.0..=ry.1 {
+            for x in rx.0..=rx.1 {
+                let c = [x, y, z];
+                let boxed = |grow: f64| {
+                    let lo = [0, 1, 2].map(|a| {
+                        plane(a, c[a])
+                            - f64::from(shape.margin[a]) * (1.0 + grow)
+                            - grow * f64::from(shape.cell_size[a])
+                    });
+                    let hi = [0, 1, 2].map(|a| {
+                        plane(a, c[a] + 1)
+                            + f64::from(shape.margin[a]) * (1.0 + grow)
+                            + grow * f64::from(shape.cell_size[a])
+                    });
+                    sat_overlaps(tri, lo, hi)
+                };
+                let is_listed = listed.binary_search(&cells.index(c)).is_ok();
+                if boxed(-1e-9) {
+                    want += 1;
+                    assert!(is_listed, "{what}: {tri:?} not in {c:?}");
+                } else if is_listed {
+                    assert!(
+                        boxed(1.0 / 512.0),
+                        "{what}: {tri:?} listed in {c:?}, which it misses"
+                    );
+                }
+            }
+        }
+    }
+    want
 }
 
 /// The voxelization lists a triangle in every cell whose box enlarged by the margin it meets (by
@@ -107,10 +169,6 @@ fn voxelization_lists_exactly_the_overlapped_cells() {
             let grid = UniformGrid::build(&mesh, p, &mut budget).unwrap();
             let shape = &grid.shape;
             let cells = Cells::new(shape);
-            let res = shape.res;
-            let plane = |a: usize, k: u32| {
-                f64::from(shape.bounds.min[a]) + f64::from(k) * f64::from(shape.cell_size[a])
-            };
             for tri in mesh.triangles() {
                 let mut got = Vec::new();
                 cells.for_each(tri, true, &mut |c| got.push(c as usize));
@@ -121,54 +179,8 @@ fn voxelization_lists_exactly_the_overlapped_cells() {
                     g
                 };
                 assert_eq!(sorted.len(), got.len(), "scene {s}: a cell twice");
-                // Every cell within two of the bounds, against the oracle at the margin (must be
-                // listed) and at the margin plus the slack (may be listed).
-                let b = Aabb::of_triangle(tri);
-                let range = |a: usize| {
-                    let f = |x: f32| {
-                        ((f64::from(x) - f64::from(shape.bounds.min[a]))
-                            / f64::from(shape.cell_size[a]))
-                        .max(0.0) as u32
-                    };
-                    (
-                        f(b.min[a]).saturating_sub(2),
-                        (f(b.max[a]) + 2).min(res[a] - 1),
-                    )
-                };
-                let (rx, ry, rz) = (range(0), range(1), range(2));
-                let mut want = 0usize;
-                for z in rz.0..=rz.1 {
-                    for y in ry.0..=ry.1 {
-                        for x in rx.0..=rx.1 {
-                            let c = [x, y, z];
-                            let boxed = |grow: f64| {
-                                let lo = [0, 1, 2].map(|a| {
-                                    plane(a, c[a])
-                                        - f64::from(shape.margin[a]) * (1.0 + grow)
-                                        - grow * f64::from(shape.cell_size[a])
-                                });
-                                let hi = [0, 1, 2].map(|a| {
-                                    plane(a, c[a] + 1)
-                                        + f64::from(shape.margin[a]) * (1.0 + grow)
-                                        + grow * f64::from(shape.cell_size[a])
-                                });
-                                sat_overlaps(tri, lo, hi)
-                            };
-                            let index = cells.index(c);
-                            let listed = sorted.binary_search(&index).is_ok();
-                            if boxed(-1e-9) {
-                                want += 1;
-                                assert!(listed, "scene {s} λ {}: {tri:?} not in {c:?}", p.density);
-                            } else if listed {
-                                assert!(
-                                    boxed(1.0 / 512.0),
-                                    "scene {s} λ {}: {tri:?} listed in {c:?}, which it misses",
-                                    p.density
-                                );
-                            }
-                        }
-                    }
-                }
+                let what = alloc::format!("scene {s} λ {}", p.density);
+                let want = assert_listed_exactly(shape, &cells, tri, &sorted, &what);
                 assert!(want >= 1 || got.is_empty());
                 long += usize::from(got.len() >= 8);
             }

@@ -11,24 +11,26 @@
 //! of cells it is an interval of the remaining coordinate: rows of the projection onto the plane
 //! most facing the triangle give runs of columns, and each column a run of cells along the third
 //! axis — the overlapped cells, with work proportional to them plus the rows. Footprints of up to
-//! four cells an axis are cheaper tested cell by cell, four cells at a time, as bit masks.
+//! four cells an axis are cheaper tested cell by cell, four cells at a time, as bit masks; thin
+//! triangles with larger footprints slab by slab ([`slabs`]).
 //!
 //! The footprint is computed in f32 with a pad that covers its rounding, the row inequalities in
-//! f64 cell units (`(p − min) / size`), the masks (2×2×2 or 4×4×4 cells) in f32 cell units from
-//! the footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10,
+//! f64 cell units (`(p − min) / size`), the masks (2×2×2 or 4×4×4 cells) and the slabs in f32 cell
+//! units from the footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10,
 //! far above the rounding of these few operations (docs/design.md bounds it), so no cell the exact
 //! test would accept is dropped.
 
 use glam::{Vec3, Vec3A, Vec4};
 
 use super::layout::Shape;
-use slabs::{is_thin, MAX_SLAB_CELLS};
+use slabs::slab_axis;
 
 mod slabs;
 
 /// Relative widening of the enlarged cell (in cell units), covering the rounding of the tests
 /// (docs/design.md: below 2^-17 of a constraint's width in f64 for grids of up to 2^32 cells per
-/// axis, below 12·2^-24 in the 2×2×2 f32 masks and 24·2^-24 in the 4×4×4 ones).
+/// axis, below 12·2^-24 in the 2×2×2 f32 masks and 24·2^-24 in the 4×4×4 ones, below 1/1 000 of
+/// a cell in the slabs).
 const ROUNDING_SLACK: f64 = 1.0 + 1.0 / 1024.0;
 
 /// What insertion needs of the grid's shape: the footprint in f32, the tests in f64 cell units.
@@ -237,7 +239,9 @@ impl Cells {
         }
     }
 
-    /// [`Cells::for_each`] for a footprint of more than two cells on some axis.
+    /// [`Cells::for_each`] for a footprint of more than two cells on some axis: each cell of `fp`
+    /// at most once and none outside it (the build makes room for the footprint's cells and
+    /// stores them unchecked, build.rs).
     #[inline(never)]
     pub fn for_each_large(
         &self,
@@ -259,19 +263,15 @@ impl Cells {
             self.for_box(fp, emit);
         } else {
             let q = tri.map(|p| [0, 1, 2].map(|a| self.local(p[a], a)));
-            // Slabs across the triangle's longest extent: its long edge then moves at most a cell
-            // across a slab on the other axes.
-            let extent = [0, 1, 2].map(|a| {
-                let (lo, hi) = (
-                    q[0][a].min(q[1][a]).min(q[2][a]),
-                    q[0][a].max(q[1][a]).max(q[2][a]),
-                );
-                hi - lo
-            });
-            if thick == [true; 3] && (0..3).all(|a| fp.len(a) <= MAX_SLAB_CELLS) && is_thin(&q) {
-                self.slabs(&q, fp, largest_axis(extent), emit);
+            // A footprint one cell thick on an axis is cheaper by rows (one projection decides).
+            let slabs = if thick == [true; 3] {
+                slab_axis(&q, fp)
             } else {
-                self.overlapped(&q, fp, thick, emit);
+                None
+            };
+            match slabs {
+                Some(s) => self.slabs(&q, fp, s, emit),
+                None => self.overlapped(&q, fp, thick, emit),
             }
         }
     }

@@ -1,4 +1,4 @@
-//! Long thin triangles' cells, slab by slab along the footprint's longest axis, four slabs at a
+//! Long thin triangles' cells, slab by slab across the triangle's largest extent, four slabs at a
 //! time in f32 lanes: the triangle's piece in each slab (the slab's enlarged range on that axis) is
 //! bounded from the piece's corners, and those bounds give the slab's candidate cells on the other
 //! two axes — nearly always a single cell or a column of them, which the piece meets everywhere.
@@ -19,8 +19,8 @@
 //! edges along the long edge, the cross-section `d` and the other two edges, whose normals and the
 //! two axes are all the separating axes there are.
 //!
-//! Rounding: coordinates are taken in cells from the footprint's corner, below `M =`
-//! [`MAX_SLAB_CELLS`] `+ 2` in magnitude, and rounded to f32 once (error `u·M`, `u = 2^-24`). A
+//! Rounding: coordinates are taken in cells from the footprint's corner, within `[−2,`
+//! [`MAX_SLAB_CELLS`]`]` ([`slab_axis`]; `M = 130` bounds their magnitudes and differences), and rounded to f32 once (error `u·M`, `u = 2^-24`). A
 //! corner (`a + x·slope + λ·d`, `x`, `λ` and the slope from a few differences and products) is
 //! then within `16u·M` of the exact piece's corner: below 1/1 000 of a cell for `M = 130`, and a
 //! separating axis's dot products within `4u·M` of their size, against the rounding slack of
@@ -31,18 +31,33 @@ use glam::Vec4;
 
 use super::{Cells, Footprint};
 
-/// The longest footprint (cells on its longest axis) the slab walk takes: the f32 rounding bound
-/// above holds below it. Longer thin triangles are listed by rows in f64.
+/// The farthest a triangle's coordinates may reach from its footprint's corner, in cells, for the
+/// slab walk: the f32 rounding bound above holds below it. Longer thin triangles are listed by
+/// rows in f64.
 pub(super) const MAX_SLAB_CELLS: u32 = 128;
 
 /// The slab lanes' centres from the group's first slab.
 const CENTRE: Vec4 = Vec4::new(0.5, 1.5, 2.5, 3.5);
 
-/// Whether a triangle (`q`, in cell units) is thin enough for [`Cells::slabs`]: its height over
-/// its longest edge at most a cell (`|(q1 − q0) × (q2 − q0)| ≤ |longest edge|`, both squared), so
-/// that a slab's piece spans about two cells at most across.
+/// The axis to walk a triangle (`q`, in cell units, footprint `fp`) across by [`Cells::slabs`] —
+/// that of its largest extent, so that its long edge moves at most a cell across a slab on the
+/// other two axes — or `None` when the rows suit it better: a triangle whose height over its
+/// longest edge is above a cell (`|(q1 − q0) × (q2 − q0)| > |longest edge|`, both squared; a
+/// slab's piece would span many cells across), or one whose coordinates from the footprint's
+/// corner leave `[−2, MAX_SLAB_CELLS]` (the rounding bound's range: a nested grid's triangles may
+/// hang over its box, so the footprint's length alone does not bound them).
 #[inline(always)]
-pub(super) fn is_thin(q: &[[f64; 3]; 3]) -> bool {
+pub(super) fn slab_axis(q: &[[f64; 3]; 3], fp: &Footprint) -> Option<usize> {
+    let reach = f64::from(MAX_SLAB_CELLS);
+    let mut extent = [0.0; 3];
+    for (a, e) in extent.iter_mut().enumerate() {
+        let lo = q[0][a].min(q[1][a]).min(q[2][a]) - f64::from(fp.lo[a]);
+        let hi = q[0][a].max(q[1][a]).max(q[2][a]) - f64::from(fp.lo[a]);
+        if !(lo >= -2.0 && hi <= reach) {
+            return None;
+        }
+        *e = hi - lo;
+    }
     let sub = |p: [f64; 3], r: [f64; 3]| [p[0] - r[0], p[1] - r[1], p[2] - r[2]];
     let len2 = |v: [f64; 3]| v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     let (e1, e2, e3) = (sub(q[1], q[0]), sub(q[2], q[0]), sub(q[2], q[1]));
@@ -51,11 +66,21 @@ pub(super) fn is_thin(q: &[[f64; 3]; 3]) -> bool {
         e1[2] * e2[0] - e1[0] * e2[2],
         e1[0] * e2[1] - e1[1] * e2[0],
     ];
-    len2(n) <= len2(e1).max(len2(e2)).max(len2(e3))
+    if len2(n) > len2(e1).max(len2(e2)).max(len2(e3)) {
+        return None;
+    }
+    Some(if extent[0] >= extent[1] && extent[0] >= extent[2] {
+        0
+    } else if extent[1] >= extent[2] {
+        1
+    } else {
+        2
+    })
 }
 
-/// `1/x`, or `f32::MAX` where that is not finite (an edge of no extent on the slab axis): products
-/// with it are then never NaN.
+/// `1/x`, or `f32::MAX` where that is not finite (an edge of no extent on the slab axis): its
+/// products with the non-negative distances along the axis are then never NaN (`λ`, below, is
+/// clamped to `[0, 1]` in every lane, the unused ones too).
 #[inline(always)]
 fn finite_inverse(x: f32) -> f32 {
     let i = 1.0 / x;
@@ -70,8 +95,8 @@ fn finite_inverse(x: f32) -> f32 {
 /// first and the last (from −1 to `last + 1`); empty lanes have `first > last`.
 ///
 /// Both ends are taken to non-negative values below 2^23 before truncation, so truncation is
-/// floor and exact: `ceil(x) = trunc(x) + (trunc(x) < x)`, and `floor(y) = trunc(y + 1) − 1` for
-/// `y ≥ −1`.
+/// floor: `ceil(x) = trunc(x) + (trunc(x) < x)`, and `floor(y) = trunc(y + 1) − 1` for `y ≥ −1`
+/// (the `+ 1` may round a `y` just below 0 up to 1, which keeps one more cell: never fewer).
 #[inline(always)]
 fn centres_in(lo: Vec4, hi: Vec4, last: f32) -> ([i32; 4], [i32; 4]) {
     let x = (lo - 0.5).max(Vec4::ZERO).min(Vec4::splat(last + 1.0));
@@ -85,14 +110,16 @@ fn centres_in(lo: Vec4, hi: Vec4, last: f32) -> ([i32; 4], [i32; 4]) {
 #[inline(always)]
 fn ceil_floor(x: Vec4, y: Vec4) -> ([i32; 4], [i32; 4]) {
     use core::arch::x86_64::{
-        __m128, _mm_castps_si128, _mm_cmplt_ps, _mm_cvtepi32_ps, _mm_cvttps_epi32, _mm_set1_epi32,
-        _mm_storeu_si128, _mm_sub_epi32,
+        _mm_castps_si128, _mm_cmplt_ps, _mm_cvtepi32_ps, _mm_cvttps_epi32, _mm_loadu_ps,
+        _mm_set1_epi32, _mm_storeu_si128, _mm_sub_epi32,
     };
-    let (x, y) = (__m128::from(x), __m128::from(y));
+    let (x, y) = (x.to_array(), y.to_array());
     let (mut first, mut last) = ([0i32; 4], [0i32; 4]);
-    // SAFETY: SSE2 is always present on x86-64, and every intrinsic here is SSE2 or SSE; the
-    // stores write 16 bytes into local `[i32; 4]`s.
+    // SAFETY: SSE2 is always present on x86-64, and every intrinsic here is SSE2 or SSE; the loads
+    // read and the stores write 16 bytes of local arrays of four 4-byte values. (Loaded from
+    // arrays: glam's `Vec4` is an `__m128` only with its SSE2 backend.)
     unsafe {
+        let (x, y) = (_mm_loadu_ps(x.as_ptr()), _mm_loadu_ps(y.as_ptr()));
         let t = _mm_cvttps_epi32(x);
         // A lane below `x` is all ones, −1: subtracting it adds one.
         let below = _mm_castps_si128(_mm_cmplt_ps(_mm_cvtepi32_ps(t), x));
@@ -131,9 +158,9 @@ struct Pieces {
 }
 
 impl Cells {
-    /// The cells of `fp` (at most [`MAX_SLAB_CELLS`] cells an axis) the thin triangle (`q`, in cell
-    /// units) overlaps, slab by slab along `s`, the axis of the triangle's largest extent (so the
-    /// long edge's slope on the other axes is at most 1; see the module's comment).
+    /// The cells of `fp` the triangle (`q`, in cell units) overlaps, slab by slab along `s`, for a
+    /// triangle and axis [`slab_axis`] accepts (see the module's comment). Each cell of `fp` at
+    /// most once, none outside it — what [`Cells::for_each_large`] promises its callers.
     #[inline(never)]
     pub(super) fn slabs(
         &self,
@@ -142,7 +169,7 @@ impl Cells {
         s: usize,
         emit: &mut impl FnMut(u32),
     ) {
-        debug_assert!((0..3).all(|a| fp.len(a) <= MAX_SLAB_CELLS));
+        debug_assert_eq!(slab_axis(q, fp), Some(s));
         let (v, w) = ((s + 1) % 3, (s + 2) % 3);
         let local = |p: [f64; 3]| [s, v, w].map(|a| (p[a] - f64::from(fp.lo[a])) as f32);
         // The vertices in order along `s`: the piece of a slab lies between the long edge `a c`
@@ -176,7 +203,13 @@ impl Cells {
             let t0 = (cs - hs).max(splat(a[0]));
             let t1 = (cs + hs).min(splat(c[0]));
             let (x0, x1) = (t0 - a[0], t1 - a[0]);
-            let lambda = |x: Vec4, t: Vec4| (x * inv_up).min((c[0] - t) * inv_down).min(Vec4::ONE);
+            // Clamped below too: in a lane past the triangle `c_s − t` is negative, and times
+            // `f32::MAX` −∞, whose product with a zero `d` would be NaN.
+            let lambda = |x: Vec4, t: Vec4| {
+                (x * inv_up)
+                    .min((c[0] - t) * inv_down)
+                    .clamp(Vec4::ZERO, Vec4::ONE)
+            };
             let (l0, l1) = (lambda(x0, t0), lambda(x1, t1));
             let kink = t0.cmple(splat(b[0])) & splat(b[0]).cmple(t1);
             // A slab of the footprint whose enlarged range meets the triangle's.
@@ -196,6 +229,7 @@ impl Cells {
                 let hi = p0.max(p1).max(q0).max(q1);
                 p.lo[k] = Vec4::select(kink, lo.min(splat(b[k + 1])), lo);
                 p.hi[k] = Vec4::select(kink, hi.max(splat(b[k + 1])), hi);
+                debug_assert!(!p.lo[k].is_nan() && !p.hi[k].is_nan());
                 (p.p0[k], p.p1[k], p.q0[k], p.q1[k]) = (p0, p1, q0, q1);
             }
             (p, live, kink)
@@ -307,6 +341,104 @@ impl PieceAxes {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::accel::grid::layout::Shape;
+    use crate::accel::grid::tests::assert_listed_exactly;
+    use crate::ray::Aabb;
+    use crate::workload::SplitMix64;
+    use alloc::vec::Vec;
+    use glam::Vec3;
+
+    /// The slab walk alone against the 13-axis oracle, on triangles chosen to stress it: long thin
+    /// ones at all angles and widths up to the thinness limit, strips lying on cell planes, two
+    /// vertices sharing their coordinate on the slab axis (first two, last two), the middle vertex
+    /// on the long edge, on slab ends, and collinear ones — on a grid near the origin and one far
+    /// from it (whose margin is several cells). Each cell of the footprint at most once, none
+    /// outside it, every overlapped cell listed and none missed by more than the slack; and the
+    /// separating axes of ambiguous slabs are reached.
+    #[test]
+    fn slabs_list_exactly_the_overlapped_cells() {
+        let mut rng = SplitMix64::new(0x51ab);
+        for origin in [Vec3::ZERO, Vec3::new(1e7, -1e7, 3e6)] {
+            let tight = Aabb {
+                min: origin,
+                max: origin + Vec3::splat(24.0),
+            };
+            let shape = Shape::new(tight, 13_824, 1.0).unwrap();
+            let cells = Cells::new(&shape);
+            let plane = |a: usize, k: f32| shape.bounds.min[a] + k * shape.cell_size[a];
+            let at = |p: [f32; 3]| Vec3::from_array([0, 1, 2].map(|a| plane(a, p[a])));
+            let mut tris: Vec<[Vec3; 3]> = Vec::new();
+            for _ in 0..600 {
+                // In cell coordinates: a long edge, the third vertex off it by up to a cell.
+                let a = rng.next_vec3() * 22.0 + Vec3::ONE;
+                let b = rng.next_vec3() * 22.0 + Vec3::ONE;
+                let m = a.lerp(b, rng.next_f32());
+                let off = (rng.next_vec3() - Vec3::splat(0.5)) * (2.0 * rng.next_f32());
+                tris.push([a, b, m + off].map(|p| at(p.to_array())));
+            }
+            for k in 1..20 {
+                let k = k as f32;
+                // Strips on the plane z = k, with the last two or the first two vertices sharing x.
+                tris.push([[1.3, 2.0, k], [k + 3.0, 3.0, k], [k + 3.0, 2.4, k]].map(at));
+                tris.push([[2.0, 1.5, k], [2.0, 2.5, k], [k + 4.0, 7.0, k]].map(at));
+                // The middle vertex on the long edge, on cell planes, and a collinear one.
+                tris.push([[1.0, 1.0, 1.0], [k, k, k], [21.0, 21.0, 21.0]].map(at));
+                tris.push([[1.0, k, 2.0], [11.0, k, 7.0], [21.0, k, 12.0]].map(at));
+                tris.push([[1.5, 2.5, 3.5], [k + 0.5, 3.5, 4.5], [k + 0.5, 3.5, 4.5]].map(at));
+                tris.push([[1.0, 1.0, 1.0], [k, 1.0, 1.0], [k, k * 0.5, 2.0]].map(at));
+            }
+            let (mut walked, mut ambiguous) = (0, 0);
+            for tri in &tris {
+                let fp = cells.footprint(tri);
+                if (0..3).any(|a| fp.len(a) < 2) {
+                    continue;
+                }
+                let q = tri.map(|p| [0, 1, 2].map(|a| cells.local(p[a], a)));
+                let Some(s) = slab_axis(&q, &fp) else {
+                    continue;
+                };
+                let mut got = Vec::new();
+                cells.slabs(&q, &fp, s, &mut |c| got.push(c as usize));
+                let mut sorted = got.clone();
+                sorted.sort_unstable();
+                sorted.dedup();
+                assert_eq!(sorted.len(), got.len(), "{tri:?}: a cell twice");
+                let coords = |c: usize| {
+                    let r = shape.res.map(|r| r as usize);
+                    [c % r[0], c / r[0] % r[1], c / (r[0] * r[1])]
+                };
+                for &c in &sorted {
+                    let c = coords(c);
+                    let inside = (0..3).all(|a| (fp.lo[a]..=fp.hi[a]).contains(&(c[a] as u32)));
+                    assert!(inside, "{tri:?}: {c:?} outside {fp:?}");
+                }
+                let what = alloc::format!("slabs at {origin:?}");
+                assert_listed_exactly(&shape, &cells, tri, &sorted, &what);
+                walked += 1;
+                // A slab with two cells or more on both other axes: the separating axes decided.
+                let (v, w) = ((s + 1) % 3, (s + 2) % 3);
+                let slab_of = |c: usize| coords(c)[s];
+                ambiguous += usize::from((fp.lo[s]..=fp.hi[s]).any(|i| {
+                    let cs: Vec<[usize; 3]> = sorted
+                        .iter()
+                        .filter(|&&c| slab_of(c) == i as usize)
+                        .map(|&c| coords(c))
+                        .collect();
+                    let span = |k: usize| {
+                        let lo = cs.iter().map(|c| c[k]).min().unwrap_or(0);
+                        let hi = cs.iter().map(|c| c[k]).max().unwrap_or(0);
+                        hi - lo
+                    };
+                    span(v) >= 1 && span(w) >= 1
+                }));
+            }
+            assert!(walked > 400, "only {walked} triangles walked at {origin:?}");
+            assert!(
+                ambiguous > 100,
+                "only {ambiguous} with ambiguous slabs at {origin:?}"
+            );
+        }
+    }
 
     /// The SSE2 conversion (on x86-64) gives the reference's cells: integers, halves, values just
     /// above and below integers, zero and the largest cell counts.
@@ -315,7 +447,11 @@ mod tests {
         let mut values = alloc::vec![0.0f32, 0.5, 1.0, 127.0, 129.5, 8_388_607.0];
         for k in 0..300 {
             let x = k as f32 * 0.37;
-            values.extend([x, x.next_up(), x.next_down().max(0.0), x.floor(), x.ceil()]);
+            let (up, down) = (
+                f32::from_bits(x.to_bits() + 1),
+                f32::from_bits(x.to_bits().saturating_sub(1)),
+            );
+            values.extend([x, up, down, x.floor(), x.ceil()]);
         }
         for four in values.chunks_exact(4) {
             let x = Vec4::from_slice(four);
