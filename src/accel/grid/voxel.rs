@@ -16,9 +16,9 @@
 //!
 //! The footprint is computed in f32 with a pad that covers its rounding, the row inequalities in
 //! f64 cell units (`(p − min) / size`), the masks (2×2×2 or 4×4×4 cells) and the slabs in f32 cell
-//! units from the footprint's corner, all against cells enlarged by the margin and then by a relative 2^-10,
-//! far above the rounding of these few operations (docs/design.md bounds it), so no cell the exact
-//! test would accept is dropped.
+//! units from the footprint's corner, all against cells enlarged by the margin and then by a
+//! relative 2^-10, far above the rounding of these few operations (docs/design.md bounds it), so no
+//! cell the exact test would accept is dropped.
 
 use glam::{Vec3, Vec3A, Vec4};
 

@@ -20,8 +20,8 @@
 //! two axes are all the separating axes there are.
 //!
 //! Rounding: coordinates are taken in cells from the footprint's corner, within `[−2,`
-//! [`MAX_SLAB_CELLS`]`]` ([`slab_axis`]; `M = 130` bounds their magnitudes and differences), and rounded to f32 once (error `u·M`, `u = 2^-24`). A
-//! corner (`a + x·slope + λ·d`, `x`, `λ` and the slope from a few differences and products) is
+//! [`MAX_SLAB_CELLS`]`]` ([`slab_axis`]; `M = 130` bounds their magnitudes and differences), and
+//! rounded to f32 once (error `u·M`, `u = 2^-24`). A corner (`a + x·slope + λ·d`, `x`, `λ` and the slope from a few differences and products) is
 //! then within `16u·M` of the exact piece's corner: below 1/1 000 of a cell for `M = 130`, and a
 //! separating axis's dot products within `4u·M` of their size, against the rounding slack of
 //! 2^-10 of half an enlarged cell (`ROUNDING_SLACK`): no cell the exact test accepts is dropped,
@@ -29,7 +29,7 @@
 
 use glam::Vec4;
 
-use super::{Cells, Footprint};
+use super::{cross, largest_axis, sub, Cells, Footprint};
 
 /// The farthest a triangle's coordinates may reach from its footprint's corner, in cells, for the
 /// slab walk: the f32 rounding bound above holds below it. Longer thin triangles are listed by
@@ -58,24 +58,12 @@ pub(super) fn slab_axis(q: &[[f64; 3]; 3], fp: &Footprint) -> Option<usize> {
         }
         *e = hi - lo;
     }
-    let sub = |p: [f64; 3], r: [f64; 3]| [p[0] - r[0], p[1] - r[1], p[2] - r[2]];
     let len2 = |v: [f64; 3]| v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
     let (e1, e2, e3) = (sub(q[1], q[0]), sub(q[2], q[0]), sub(q[2], q[1]));
-    let n = [
-        e1[1] * e2[2] - e1[2] * e2[1],
-        e1[2] * e2[0] - e1[0] * e2[2],
-        e1[0] * e2[1] - e1[1] * e2[0],
-    ];
-    if len2(n) > len2(e1).max(len2(e2)).max(len2(e3)) {
+    if len2(cross(e1, e2)) > len2(e1).max(len2(e2)).max(len2(e3)) {
         return None;
     }
-    Some(if extent[0] >= extent[1] && extent[0] >= extent[2] {
-        0
-    } else if extent[1] >= extent[2] {
-        1
-    } else {
-        2
-    })
+    Some(largest_axis(extent))
 }
 
 /// `1/x`, or `f32::MAX` where that is not finite (an edge of no extent on the slab axis): its
