@@ -49,12 +49,13 @@ struct AxisRay {
     /// `1/d` times `1 − SPLIT_SLACK` and `1 + SPLIT_SLACK`.
     inv_dn: f32,
     inv_up: f32,
-    /// 1 when the near child is the upper one (the ray runs down the axis).
-    near: u32,
-    /// The node bit flagging the near (far) child as empty.
+    /// The node bit flagging the near child as empty ([`EMPTY_BELOW`] or [`EMPTY_ABOVE`]; the far
+    /// child's is the other). Four fields: 16 bytes, so an axis's constants are one shift away.
     near_empty: u32,
-    far_empty: u32,
 }
+
+/// Both children's empty flags: `near_empty ^ BOTH_EMPTY` is the far child's.
+const BOTH_EMPTY: u32 = EMPTY_BELOW | EMPTY_ABOVE;
 
 #[derive(Clone, Copy)]
 struct Pending {
@@ -69,6 +70,10 @@ struct Pending {
 #[derive(Clone, Copy)]
 pub(super) struct Clip {
     axes: [AxisRay; 4],
+    /// Bit `a` set when the ray runs down axis `a` (its near child there is the upper one): read
+    /// from a register by the walk, not from the axis's constants in memory, so that the next
+    /// node's index waits for one load (the node's), not two.
+    down: u32,
     t0: f32,
     t1: f32,
 }
@@ -78,14 +83,15 @@ impl Clip {
     /// box is empty). A ray the triangle test refuses (a NaN or infinite component) may get either;
     /// the query refuses it after.
     ///
-    /// Per axis: the origin, `1/d` scaled down and up by the slack, whether the ray runs downwards
-    /// (its near child is the upper one) and the node bits that flag its near and far child as
-    /// empty. `1/d` is `±∞` for a zero component, which makes every split `t` on that axis `±∞`
-    /// (the ray never crosses the plane: the near child holds the origin when `t` is `+∞`, the far
-    /// one when `−∞`) or NaN when the origin is on the plane (both children: the ray lies in the
-    /// plane, which both closed boxes hold). A component whose inverse overflows, or underflows
-    /// (so its relative error is unbounded), gets NaN: no constraint on that axis, every split
-    /// visits both sides. An array of four, indexed by the node's 2-bit axis, needs no checks.
+    /// Per axis: the origin, `1/d` scaled down and up by the slack and the node bit that flags its
+    /// near child as empty; and a bit per axis saying whether the ray runs downwards (its near
+    /// child is the upper one). `1/d` is `±∞` for a zero component, which makes every split `t` on
+    /// that axis `±∞` (the ray never crosses the plane: the near child holds the origin when `t` is
+    /// `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children: the ray
+    /// lies in the plane, which both closed boxes hold). A component whose inverse overflows, or
+    /// underflows (so its relative error is unbounded), gets NaN: no constraint on that axis, every
+    /// split visits both sides. An array of four, indexed by the node's 2-bit axis, needs no
+    /// checks.
     #[inline(always)]
     pub(super) fn new(ray: &Ray, bounds: &Aabb) -> Option<Clip> {
         if bounds.is_empty() {
@@ -131,12 +137,15 @@ impl Clip {
                 org: org[a],
                 inv_dn: dn[a],
                 inv_up: up[a],
-                near: down,
                 near_empty: EMPTY_BELOW << down,
-                far_empty: EMPTY_ABOVE >> down,
             };
         }
-        Some(Clip { axes, t0, t1 })
+        Some(Clip {
+            axes,
+            down: signs & 7,
+            t0,
+            t1,
+        })
     }
 }
 
@@ -164,6 +173,7 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
         let mut mailbox = Mailbox::new();
         let Clip {
             axes,
+            down,
             mut t0,
             mut t1,
         } = clip;
@@ -195,10 +205,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let near_t1 = if ts_hi < t1 { ts_hi } else { t1 };
                 let far_t0 = if ts_lo > t0 { ts_lo } else { t0 };
                 // Children pairs start at even indices, so the far child is the near one's sibling.
-                let near = node.children() + ax.near;
+                let near = node.children() + ((down >> node.axis()) & 1);
                 let far = near ^ 1;
                 let go_near = bits & ax.near_empty == 0 && near_t1 >= t0;
-                let go_far = bits & ax.far_empty == 0 && far_t0 <= t1;
+                let go_far = bits & (ax.near_empty ^ BOTH_EMPTY) == 0 && far_t0 <= t1;
                 if go_near {
                     if go_far {
                         // The depth bound (≤ MAX_DEPTH < STACK_SIZE) leaves room: one entry per level.
