@@ -169,6 +169,12 @@ impl Line {
 #[derive(Clone, Copy)]
 struct Axes {
     t_next: [f32; 4],
+    /// The plane after the next one's t (`plane_t(a, k + step)`), made when `k` moves so that a
+    /// step only moves it into `t_next`: the next axis then waits for a copy, not for the plane's
+    /// arithmetic (~20 cycles of conversion, products and sums on the walk's chain from one
+    /// cell's choice of axis to the next). Only read on a moving axis not at `k_end`, where
+    /// `k + step` is a plane of the grid.
+    t_after: [f32; 4],
     /// The next plane's index (exact: f32 would stop counting at 2^24 planes, and a grid may have
     /// more on one axis).
     k: [u32; 4],
@@ -194,6 +200,14 @@ impl Axes {
     #[inline(always)]
     fn plane_t(&self, axis: usize, k: u32) -> f32 {
         (self.lo[axis] + k as f32 * self.size[axis] - self.org[axis]) * self.inv[axis]
+    }
+
+    /// Puts moving axis `a`'s next plane at `k`: `t_next` and `t_after` from the planes' positions.
+    #[inline(always)]
+    fn set_next_plane(&mut self, a: usize, k: u32) {
+        self.k[a] = k;
+        self.t_next[a] = self.plane_t(a, k);
+        self.t_after[a] = self.plane_t(a, k.wrapping_add(self.step[a]));
     }
 
     /// The axis whose boundary comes first (ties to the lower axis), without branches, and its
@@ -342,8 +356,7 @@ impl Axes {
                     self.start[a]
                 };
                 if self.moves(a) {
-                    self.k[a] = if self.up(a) { c + 1 } else { c };
-                    self.t_next[a] = self.plane_t(a, self.k[a]);
+                    self.set_next_plane(a, if self.up(a) { c + 1 } else { c });
                 }
                 cell += c as usize * stride;
                 stride *= res[a] as usize;
@@ -571,6 +584,7 @@ impl Axes {
     fn none() -> Axes {
         Axes {
             t_next: [f32::INFINITY; 4],
+            t_after: [f32::INFINITY; 4],
             k: [0; 4],
             k_end: [0; 4],
             step: [0; 4],
@@ -642,7 +656,6 @@ impl Axes {
                 } else {
                     block_stride.wrapping_neg()
                 };
-                axes.k[a] = cell + u32::from(up);
                 axes.k_end[a] = if up { res } else { 0 };
                 axes.step[a] = if up { 1 } else { u32::MAX };
                 axes.delta[a] = if up { stride } else { stride.wrapping_neg() };
@@ -650,7 +663,7 @@ impl Axes {
                 axes.size[a] = shape.cell_size[a];
                 axes.org[a] = line.org[a];
                 axes.inv[a] = inv;
-                axes.t_next[a] = axes.plane_t(a, axes.k[a]);
+                axes.set_next_plane(a, cell + u32::from(up));
             }
             stride *= res as usize;
             block_stride *= grid.blocks.res[a] as usize;
@@ -701,7 +714,10 @@ fn step(
     let crossed = axes.k[axis];
     let k = crossed.wrapping_add(axes.step[axis]);
     axes.k[axis] = k;
-    axes.t_next[axis] = axes.plane_t(axis, k);
+    // `plane_t(axis, k)`, made when `k` was `crossed`.
+    axes.t_next[axis] = axes.t_after[axis];
+    debug_assert_eq!(axes.t_next[axis].to_bits(), axes.plane_t(axis, k).to_bits());
+    axes.t_after[axis] = axes.plane_t(axis, k.wrapping_add(axes.step[axis]));
     debug_assert!(*index < grid.cell_count());
     // A block's face: the next cell is in the neighbouring block, which may be empty.
     if crossed & grid.blocks.faces == 0 {
