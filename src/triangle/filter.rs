@@ -311,7 +311,7 @@ fn survivors_of<L: Lanes, const KZ: usize, const SWAP: bool>(
     let (most, least) = (u.max(v).max(w), u.min(v).min(w));
     // First against the scene's bound (at least every lane's): most blocks are settled here,
     // without their own bounds.
-    if rejected_lanes(most, least, ray.scene_bound, ray.scene_low) == full {
+    if L::all(L::and(most.nle(ray.scene_bound), least.nge(ray.scene_low))) {
         return 0;
     }
     let s = ax

@@ -411,6 +411,32 @@ fn eight_lanes_do_what_two_four_lane_calls_do() {
             let two = lo.iter().zip(&hi).map(|(l, h)| [&l[..], &h[..]].concat());
             (eight, two.collect())
         }
+        /// `Lanes::all` of masks with and without every lane set, against its definition (all
+        /// bits of `bits`), for eight lanes and for four.
+        /// # Safety
+        /// The processor runs AVX.
+        #[target_feature(enable = "avx")]
+        unsafe fn all_lanes(a: [f32; 8], b: [f32; 8]) -> u32 {
+            let half =
+                |x: &[f32; 8], h: usize| [x[4 * h], x[4 * h + 1], x[4 * h + 2], x[4 * h + 3]];
+            let (va, vb) = (
+                Avx::load_pair(&half(&a, 0), &half(&a, 1)),
+                Avx::load_pair(&half(&b, 0), &half(&b, 1)),
+            );
+            let mut all_set = 0;
+            for m in [va.nle(vb), va.nle(Avx::splat(f32::NEG_INFINITY)), va.gt(va)] {
+                assert_eq!(Avx::all(m), Avx::bits(m) == 0xff, "{a:?} {b:?}");
+                all_set += u32::from(Avx::all(m));
+            }
+            let x = F4::load(&half(&a, 0));
+            for m in [
+                x.nle(F4::load(&half(&b, 0))),
+                x.nle(F4::splat(f32::NEG_INFINITY)),
+            ] {
+                assert_eq!(F4::all(m), F4::bits(m) == 0b1111, "{a:?} {b:?}");
+            }
+            all_set
+        }
         let special = [
             0.0f32,
             -0.0,
@@ -425,6 +451,7 @@ fn eight_lanes_do_what_two_four_lane_calls_do() {
             f32::from_bits(0xffc0_0001),
         ];
         let mut rng = SplitMix64::new(0xa1a5);
+        let mut all_set = 0;
         for _ in 0..50_000 {
             let mut value = || {
                 if rng.below(2) == 0 {
@@ -438,7 +465,11 @@ fn eight_lanes_do_what_two_four_lane_calls_do() {
             // SAFETY: `avx_pair_is_checked` asked the processor.
             let (wide, two) = unsafe { both(a, b) };
             assert_eq!(wide, two, "{a:?} {b:?}");
+            // SAFETY: as above.
+            all_set += unsafe { all_lanes(a, b) };
         }
+        // Masks with every lane set were among them.
+        assert!(all_set > 1_000, "{all_set}");
     }
 }
 
