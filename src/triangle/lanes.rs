@@ -31,9 +31,10 @@ pub(crate) trait Lanes: Copy {
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Bit `k` set where lane `k` of the mask is set.
     fn bits(m: Self::Mask) -> u32;
-    /// Whether every lane of the mask is set (what `bits(m)` with all bits set says, for the
-    /// filter's first check: on AVX one `vtestps`, where the comparison of `bits` with a constant
-    /// compiled to a conversion and a comparison of floats, ten cycles before the branch).
+    /// Whether every lane of the mask is set, for the filter's first check. The default is for
+    /// four lanes (`bits(m) == 0b1111`); a wider type must override it (AVX: one `vtestps`, where
+    /// the comparison of `bits` with 0xff compiled to a conversion of the mask to floats and a
+    /// float comparison before the branch).
     #[inline(always)]
     fn all(m: Self::Mask) -> bool {
         Self::bits(m) == 0b1111

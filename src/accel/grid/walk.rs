@@ -171,7 +171,7 @@ struct Axes {
     t_next: [f32; 4],
     /// The plane after the next one's t (`plane_t(a, k + step)`), made when `k` moves so that a
     /// step only moves it into `t_next`: the next axis then waits for a copy, not for the plane's
-    /// arithmetic (~20 cycles of conversion, products and sums on the walk's chain from one
+    /// arithmetic (a conversion, two products and two sums on the walk's chain from one
     /// cell's choice of axis to the next). Only read on a moving axis not at `k_end`, where
     /// `k + step` is a plane of the grid.
     t_after: [f32; 4],
