@@ -138,6 +138,10 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// stop 27 a switch the tapped rays ask for waits for a second batch to ask too (issue 14's
 /// interior case: the tapped primary rays overstate the kd-tree's saving on the occlusion rays
 /// after them).
+/// A refit at stop 42 on the Intel Xeon VM (the grid 54.8, 13.2 and 0.89; the kd-tree 18.4, 71.4,
+/// 2.87 and 1.35) was not adopted: on the same measurements its check differs from this one's on
+/// two of 31 scenes, rightly on gears-10k (5 % lost here) and wrongly on stadium-1M (12 % lost
+/// there), whose verdict here is a tie (docs/performance.md, "Stop 42").
 /// `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
 /// since stop 20). The kd-tree's build is one term per N·log2 N (the median over the
