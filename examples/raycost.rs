@@ -163,7 +163,7 @@ fn every_kth(data: &MeshData, k: usize) -> MeshData {
 struct Probe {
     ray_ratio: [f64; 4],
     build_ms: f64,
-    build_predictors: [f64; 2],
+    build_predictors: [f64; 4],
 }
 
 /// `|ln(prediction / truth)|` per scene, the prediction `c·x` with `c` fitted on the other scenes
@@ -239,8 +239,10 @@ fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
         priced_ratio(&sg, &sk),
     ];
     let scaled_sub = sub_ms * nlogn(mesh.len()) / nlogn(sub.len());
+    // What the library could use without a clock: the sampled tree's build work, scaled.
+    let scaled_work = sub_tree.build_work() as f64 * nlogn(mesh.len()) / nlogn(sub.len());
     println!(
-        "{:>8} tris, sampled {:>6} | kd/grid per ray: measured {:.2}, model {:.2}, priced work {:.2}, sampled priced work {:.2} | kd build {:7.2} ms, sampled {:6.3} ms ({:.1} %), scaled {:7.2}",
+        "{:>8} tris, sampled {:>6} | kd/grid per ray: measured {:.2}, model {:.2}, priced work {:.2}, sampled priced work {:.2} | kd build {:7.2} ms, sampled {:6.3} ms ({:.1} %), scaled {:7.2}, work {:.3e} (sampled, scaled {:.3e})",
         mesh.len(),
         sub.len(),
         ray_ratio[0],
@@ -250,12 +252,19 @@ fn probe(data: &MeshData, mesh: &TriMesh, rays: &[Ray], reps: usize) -> Probe {
         build_ms,
         sub_ms,
         100.0 * sub_ms / build_ms,
-        scaled_sub
+        scaled_sub,
+        tree.build_work() as f64,
+        scaled_work
     );
     Probe {
         ray_ratio,
         build_ms,
-        build_predictors: [nlogn(mesh.len()), scaled_sub],
+        build_predictors: [
+            nlogn(mesh.len()),
+            scaled_sub,
+            tree.build_work() as f64,
+            scaled_work,
+        ],
     }
 }
 
@@ -293,7 +302,12 @@ fn probe_summary(probes: &[Probe]) {
         n = probes.len()
     );
     let y: Vec<f64> = probes.iter().map(|p| p.build_ms).collect();
-    for (i, what) in [(0, "N log2 N"), (1, "the sampled tree's build, scaled")] {
+    for (i, what) in [
+        (0, "N log2 N"),
+        (1, "the sampled tree's build, scaled"),
+        (2, "the full tree's build work"),
+        (3, "the sampled tree's build work, scaled"),
+    ] {
         let x: Vec<f64> = probes.iter().map(|p| p.build_predictors[i]).collect();
         let (m, w) = stats(loo_log_errors(&x, &y));
         println!("kd build from {what} (leave-one-out): median |ln error| {m:.3}, largest {w:.3}");
