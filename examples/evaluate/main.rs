@@ -422,12 +422,14 @@ fn floor_section(md: &mut String) {
 
 /// The strategies' totals, AUTO's with trial builds at `share` of the grid's estimated time (0: none).
 fn totals(o: &Observation, known: &Selector, unknown: &Selector, r: f64, share: f64) -> Totals {
-    totals_capped(o, known, unknown, r, share, None)
+    totals_capped(o, known, unknown, r, share, None, false)
 }
 
 /// [`totals`], with a known budget's trial build (below the estimated W*) abandoned once it has
 /// taken `cap` times the grid's estimated trace time of the budget, when `cap` is given (or
 /// earlier, where the work limit already stops it). The unknown budget's switch is not capped.
+/// `keep_grid`: a known budget's grid kept while the kd-tree is built (as the online switch keeps
+/// it), so that a tree abandoned or dropped by the check costs no second grid build.
 fn totals_capped(
     o: &Observation,
     known: &Selector,
@@ -435,6 +437,7 @@ fn totals_capped(
     r: f64,
     share: f64,
     cap: Option<f64>,
+    keep_grid: bool,
 ) -> Totals {
     let (g, b) = (o.grid_build_ns * 1e-9, o.kd_build_ns * 1e-9);
     let (tg, tk) = (o.grid_ray_ns * 1e-9, o.kd_ray_ns * 1e-9);
@@ -451,7 +454,7 @@ fn totals_capped(
     let auto_known = g
         + known.sample_s
         + if r >= known.estimate.build_rays_at(share) {
-            after_switch(o, &capped, 0.0, r, true)
+            after_switch(o, &capped, 0.0, r, !keep_grid)
         } else {
             r * tg
         };
@@ -1005,15 +1008,17 @@ fn analyse(results: &[Measured], args: &Args) -> String {
          (the library uses {:.4}), with the budget where the worst is; *capped*: the same with a \
          trial's build abandoned once it has taken the share of the grid's estimated trace time \
          (or where the work limit stops it first; simulated: the library caps a build's work, not \
-         its time, and not by the budget), the rest of the rays on the grid, rebuilt; the unknown \
-         budget's column is not capped:\n",
+         its time, and not by the budget), the rest of the rays on the grid, rebuilt; *grid kept*: \
+         the grid kept while the kd-tree is built, so that an abandoned or dropped tree costs no \
+         second grid build (the library releases it first); the unknown budget's column is not \
+         capped:\n",
         TRIAL_SHARE
     );
     let _ = writeln!(
         md,
         "| share | regret geometric mean | worst | unknown budget worst | trials built |\n|---:|---:|---:|---:|---:|"
     );
-    for capped in [false, true] {
+    for (capped, keep_grid) in [(false, false), (true, false), (false, true), (true, true)] {
         for share in [
             0.0,
             1.0 / 64.0,
@@ -1033,6 +1038,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
                         r,
                         share,
                         capped.then_some(share),
+                        keep_grid,
                     );
                     let x = t.auto_known / t.oracle;
                     q.push(x);
@@ -1046,8 +1052,9 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             }
             let _ = writeln!(
                 md,
-                "| {share:.4}{} | {:.3} | {:.3} ({}) | {worst_u:.3} | {trials} |",
+                "| {share:.4}{}{} | {:.3} | {:.3} ({}) | {worst_u:.3} | {trials} |",
                 if capped { ", capped" } else { "" },
+                if keep_grid { ", grid kept" } else { "" },
                 geomean(&q),
                 worst.0,
                 worst.1
