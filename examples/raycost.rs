@@ -524,12 +524,14 @@ fn main() {
             }
             "stats" => {
                 let (mut kw, mut gw) = (KdWork::default(), GridWork::default());
+                let mut hits = 0u32;
                 for r in &rays {
                     tree.intersect_counted(&mesh, r, &mut kw);
-                    grid.intersect_counted(&mesh, r, &mut gw);
+                    hits += u32::from(grid.intersect_counted(&mesh, r, &mut gw).is_hit());
                 }
                 println!(
-                    "{name:>16} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1} (largest cell {}, nested grids {})",
+                    "{name:>16} hits {:.3} kd nodes {:.1} leaves {:.1} tests {:.1} (depth {}, {} leaves) | grid cells {:.1} tests {:.1} (largest cell {}, nested grids {})",
+                    f64::from(hits) / n,
                     f64::from(kw.nodes) / n,
                     f64::from(kw.leaves) / n,
                     f64::from(kw.tests) / n,
