@@ -138,13 +138,15 @@ pub const BUILTIN_VARIANT: &str = "kd build without grid references";
 /// stop 27 a switch the tapped rays ask for waits for a second batch to ask too (issue 14's
 /// interior case: the tapped primary rays overstate the kd-tree's saving on the occlusion rays
 /// after them).
-/// A refit at stop 42 on the Intel Xeon VM (the grid 54.8, 13.2 and 0.89; the kd-tree 18.4, 71.4,
-/// 2.87 and 1.35) was not adopted: on the same measurements its check differs from this one's on
-/// two of 31 scenes, rightly on gears-10k (5 % lost here) and wrongly on stadium-1M (12 % lost
-/// there), whose verdict here is a tie (docs/performance.md, "Stop 42").
 /// `calib/default.rqcal` holds the same values as a blob (a test keeps the
 /// two identical), with the kd-tree binned at every node, 4 to 32 bins (`KdTreeParams::DEFAULT`
-/// since stop 20). The kd-tree's build is one term per N·log2 N (the median over the
+/// since stop 20). A refit at stop 42 on the Intel Xeon VM (the grid 54.8, 13.2 and 0.89; the
+/// kd-tree 18.4, 71.4, 2.87 and 1.35) was not adopted: with the same counts and times (`raycost
+/// check 1` with each calibration against `raycost time 5`, 31 scenes) its check after a kd-tree
+/// build differs from the built-in values' on two scenes, rightly on gears-10k (the built-in values
+/// keep a kd-tree 5 % slower) and wrongly on stadium-1M (it drops one 12 % faster), where the
+/// built-in values' verdict is a near-tie, both structures priced 121.28 ns a ray
+/// (docs/performance.md, "Stop 42"). The kd-tree's build is one term per N·log2 N (the median over the
 /// scenes): at stop 24, fitted with a second term per grid reference
 /// per triangle as well (5.1 + 6.4 per reference), least squares pulled towards the cheap Sierpinski
 /// tetrahedra and the dear slivers and predicted 0.58–0.76× the build on 19 of 29 of the
