@@ -205,6 +205,9 @@ struct Measured {
     /// rayq's accuracy against the exact answers, grid and kd-tree (None: not checked).
     rayq_accuracy: Option<[accuracy::Accuracy; 2]>,
     peers: Vec<PeerResult>,
+    /// The workload's camera rays and its bounces timed apart: (kd-tree, grid) ns per ray for
+    /// each kind (medians of the repeats, thread CPU time); `None` where a kind has no rays.
+    by_kind: [Option<(f64, f64)>; 2],
 }
 
 /// The accuracy check: its rays, their exact answers, and whether the mesh is closed.
@@ -270,6 +273,24 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
             })
             .collect()
     };
+    // The workload is its camera rays (side²) followed by their bounces.
+    let camera = (params.workload_side as usize).pow(2).min(rays.len());
+    let per_ray_ns = |q: &dyn rayq::RayQuery, part: &[rayq::Ray]| {
+        let mut t: Vec<f64> = (0..params.repeats.max(1))
+            .map(|_| {
+                let t0 = thread_seconds();
+                let sum = part
+                    .iter()
+                    .fold(0u32, |a, r| a.wrapping_add(q.intersect(&mesh, r).prim));
+                std::hint::black_box(sum);
+                (thread_seconds() - t0) * 1e9 / part.len() as f64
+            })
+            .collect();
+        t.sort_by(f64::total_cmp);
+        t[t.len() / 2]
+    };
+    let by_kind = [&rays[..camera], &rays[camera..]]
+        .map(|part| (!part.is_empty()).then(|| (per_ray_ns(&tree, part), per_ray_ns(&grid, part))));
     let samples = timed(&|p| sample_grid(&grid, &mesh, None, p));
     let kd_samples = timed(&|p| sample_kdtree(&tree, &mesh, None, p));
     let limit = kd_tree_work_limit(mesh.len() - mesh.degenerate_count());
@@ -347,6 +368,7 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
         abandoned_s,
         rayq_accuracy,
         peers,
+        by_kind,
     })
 }
 
@@ -395,6 +417,48 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64, released: boo
         first * tg + b + s.check_s + (r - first) * tk
     } else {
         first * tg + b + s.check_s + rebuild + (r - first) * tg
+    }
+}
+
+/// The workload's two kinds of rays timed apart on each structure: which structure is the faster
+/// per ray depends on the mix (docs/performance.md, "Stop 42"), and the workload's is about three
+/// camera rays to one bounce, where a path tracer's is mostly bounces.
+fn kinds_section(md: &mut String, results: &[Measured]) {
+    let _ = writeln!(
+        md,
+        "## Camera rays and bounces apart\n\nThe workload's camera rays (from outside the box) and \
+         its diffuse bounces (from the hits) traced apart, ns per ray (medians of the repeats), \
+         and the kd-tree's time over the grid's for each kind:\n\n| scene | camera: kd-tree / grid \
+         | kd / grid | bounce: kd-tree / grid | kd / grid |\n|---|---:|---:|---:|---:|"
+    );
+    let mut ratios = [Vec::new(), Vec::new()];
+    for m in results {
+        let [Some((kc, gc)), Some((kb, gb))] = m.by_kind else {
+            continue;
+        };
+        ratios[0].push(kc / gc);
+        ratios[1].push(kb / gb);
+        let _ = writeln!(
+            md,
+            "| {} | {kc:.0} / {gc:.0} | {:.2} | {kb:.0} / {gb:.0} | {:.2} |",
+            m.name,
+            kc / gc,
+            kb / gb
+        );
+    }
+    if !ratios[0].is_empty() {
+        let faster = |v: &[f64]| v.iter().filter(|&&r| r < 1.0).count();
+        let _ = writeln!(
+            md,
+            "\nkd-tree over grid, geometric mean: camera rays {:.3} (the kd-tree the faster on {} of \
+             {}), bounces {:.3} ({} of {}).\n",
+            geomean(&ratios[0]),
+            faster(&ratios[0]),
+            ratios[0].len(),
+            geomean(&ratios[1]),
+            faster(&ratios[1]),
+            ratios[1].len()
+        );
     }
 }
 
@@ -1468,6 +1532,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
             );
         }
     }
+    kinds_section(&mut md, results);
     floor_section(&mut md);
 
     // Peers: where AUTO has the lowest total.
