@@ -33,7 +33,9 @@ use rayq::select::decision::{
     TRIAL_SHARE,
 };
 use rayq::select::fit::{fit_check_prices, CheckObservation, Observation};
-use rayq::select::measure::{observe_rays, thread_seconds, workload, MeasureParams, Spread};
+use rayq::select::measure::{
+    median_ns, observe_rays, thread_seconds, trace, workload, MeasureParams, Spread,
+};
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
 use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams, UNKNOWN_BUDGET_SIDE};
@@ -276,18 +278,7 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     // The workload is its camera rays (side²) followed by their bounces.
     let camera = (params.workload_side as usize).pow(2).min(rays.len());
     let per_ray_ns = |q: &dyn rayq::RayQuery, part: &[rayq::Ray]| {
-        let mut t: Vec<f64> = (0..params.repeats.max(1))
-            .map(|_| {
-                let t0 = thread_seconds();
-                let sum = part
-                    .iter()
-                    .fold(0u32, |a, r| a.wrapping_add(q.intersect(&mesh, r).prim));
-                std::hint::black_box(sum);
-                (thread_seconds() - t0) * 1e9 / part.len() as f64
-            })
-            .collect();
-        t.sort_by(f64::total_cmp);
-        t[t.len() / 2]
+        median_ns(params.repeats, || trace(q, &mesh, part)).0 / part.len() as f64
     };
     let by_kind = [&rays[..camera], &rays[camera..]]
         .map(|part| (!part.is_empty()).then(|| (per_ray_ns(&tree, part), per_ray_ns(&grid, part))));

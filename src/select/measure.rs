@@ -131,7 +131,8 @@ pub struct Spread {
     pub kd_ray: Timing,
 }
 
-/// The workload rays for `mesh`: camera rays and one diffuse bounce per hit.
+/// The workload rays for `mesh`: `side²` camera rays, then one diffuse bounce per hit after them
+/// (the evaluation times the two kinds apart by that order).
 pub fn workload(mesh: &TriMesh, side: u32, seed: u64) -> Vec<Ray> {
     let mut rng = SplitMix64::new(seed);
     let mut rays = camera_rays(&mesh.bounds(), side as usize, &mut rng);
@@ -146,7 +147,9 @@ pub fn workload(mesh: &TriMesh, side: u32, seed: u64) -> Vec<Ray> {
     rays
 }
 
-fn trace(accel: &dyn RayQuery, mesh: &TriMesh, rays: &[Ray]) -> u32 {
+/// Traces `rays` through `accel` for their closest hits, returning a checksum of the hit ids (so
+/// that the work cannot be optimised away): what every timing of a workload times.
+pub fn trace(accel: &dyn RayQuery, mesh: &TriMesh, rays: &[Ray]) -> u32 {
     rays.iter().fold(0u32, |acc, r| {
         acc.wrapping_add(accel.intersect(mesh, r).prim)
     })

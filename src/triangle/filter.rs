@@ -311,7 +311,7 @@ fn survivors_of<L: Lanes, const KZ: usize, const SWAP: bool>(
     let (most, least) = (u.max(v).max(w), u.min(v).min(w));
     // First against the scene's bound (at least every lane's): most blocks are settled here,
     // without their own bounds.
-    if L::all(L::and(most.nle(ray.scene_bound), least.nge(ray.scene_low))) {
+    if L::all(rejected_lanes(most, least, ray.scene_bound, ray.scene_low)) {
         return 0;
     }
     let s = ax
@@ -322,7 +322,7 @@ fn survivors_of<L: Lanes, const KZ: usize, const SWAP: bool>(
         .max(cx.abs().max(cy.abs()));
     let z = az.abs().max(bz.abs()).max(cz.abs());
     let bound = bound(s, z);
-    let live = !rejected_lanes(most, least, bound, bound.neg()) & full;
+    let live = !L::bits(rejected_lanes(most, least, bound, bound.neg())) & full;
     if live == 0 || !ray.check_window {
         return live;
     }
@@ -332,8 +332,8 @@ fn survivors_of<L: Lanes, const KZ: usize, const SWAP: bool>(
 /// The lanes where `most` is above `bound` and `least` below `low` (or NaN). A function rather than
 /// a closure so that it is forced inline (in the AVX walks a closure stayed out of line).
 #[inline(always)]
-fn rejected_lanes<L: Lanes>(most: L, least: L, bound: L, low: L) -> u32 {
-    L::bits(L::and(most.nle(bound), least.nge(low)))
+fn rejected_lanes<L: Lanes>(most: L, least: L, bound: L, low: L) -> L::Mask {
+    L::and(most.nle(bound), least.nge(low))
 }
 
 /// The lanes whose crossing is certainly outside the ray's window (module docs, "The window

@@ -2,8 +2,10 @@
 //! plain arrays elsewhere. Every implementation performs the same IEEE operations lane by lane (no
 //! fused multiply-add), so all three give the same bits for the same inputs without NaN.
 
-/// Four f32 lanes and their comparison masks.
+/// f32 lanes (four; eight for AVX) and their comparison masks.
 pub(crate) trait Lanes: Copy {
+    /// The number of lanes (four, eight for AVX): `bits` has this many low bits.
+    const WIDTH: u32;
     /// The result of a lane-wise comparison.
     type Mask: Copy;
     fn splat(x: f32) -> Self;
@@ -31,13 +33,12 @@ pub(crate) trait Lanes: Copy {
     fn and(a: Self::Mask, b: Self::Mask) -> Self::Mask;
     /// Bit `k` set where lane `k` of the mask is set.
     fn bits(m: Self::Mask) -> u32;
-    /// Whether every lane of the mask is set, for the filter's first check. The default is for
-    /// four lanes (`bits(m) == 0b1111`); a wider type must override it (AVX: one `vtestps`, where
-    /// the comparison of `bits` with 0xff compiled to a conversion of the mask to floats and a
-    /// float comparison before the branch).
+    /// Whether every lane of the mask is set, for the filter's first check: every one of `bits`'
+    /// `WIDTH` bits. AVX overrides it with one `vtestps`, where the comparison of `bits` with 0xff
+    /// compiled to a conversion of the mask to floats and a float comparison before the branch.
     #[inline(always)]
     fn all(m: Self::Mask) -> bool {
-        Self::bits(m) == 0b1111
+        Self::bits(m) == (1 << Self::WIDTH) - 1
     }
 }
 
@@ -61,6 +62,7 @@ impl Portable {
 }
 
 impl Lanes for Portable {
+    const WIDTH: u32 = 4;
     type Mask = u32;
     #[inline(always)]
     fn splat(x: f32) -> Self {
@@ -163,6 +165,7 @@ impl Watched {
 
 #[cfg(test)]
 impl Lanes for Watched {
+    const WIDTH: u32 = 4;
     type Mask = u32;
     fn splat(x: f32) -> Self {
         Watched(Portable::splat(x))
@@ -246,6 +249,7 @@ mod sse2 {
     }
 
     impl Lanes for Sse2 {
+        const WIDTH: u32 = 4;
         type Mask = __m128;
         #[inline(always)]
         fn splat(x: f32) -> Self {
@@ -407,6 +411,7 @@ pub(crate) mod avx {
     }
 
     impl Lanes for Avx {
+        const WIDTH: u32 = 8;
         type Mask = __m256;
         #[inline(always)]
         fn splat(x: f32) -> Self {
@@ -499,6 +504,7 @@ mod neon {
     pub(crate) struct Neon(float32x4_t);
 
     impl Lanes for Neon {
+        const WIDTH: u32 = 4;
         type Mask = uint32x4_t;
         #[inline(always)]
         fn splat(x: f32) -> Self {
