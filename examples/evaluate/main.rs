@@ -412,8 +412,8 @@ fn after_switch(o: &Observation, s: &Selector, first: f64, r: f64, released: boo
 }
 
 /// The workload's two kinds of rays timed apart on each structure: which structure is the faster
-/// per ray depends on the mix (docs/performance.md, "Stop 42"), and the workload's is about three
-/// camera rays to one bounce, where a path tracer's is mostly bounces.
+/// per ray depends on the mix (docs/performance.md, "Stop 42"), and the workload has one bounce per
+/// camera hit, where a path tracer's rays are mostly bounces.
 fn kinds_section(md: &mut String, results: &[Measured]) {
     let _ = writeln!(
         md,
