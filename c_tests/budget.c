@@ -25,6 +25,8 @@ static rq_scene *build(const rq_mesh_desc *d, const rq_calibration *calib, uint6
   CHECK(o.budget_kind == RQ_BUDGET_EXPECTED);
   o.expected_rays = rays;
   o.budget_kind = kind;
+  /* The check after a kd-tree build priced from counted work (deterministic), not timed. */
+  o.clock = NULL;
   rq_scene *scene = NULL;
   CHECK_STATUS(rq_scene_build(d, &o, calib, &scene), RQ_STATUS_OK);
   return scene;

@@ -149,13 +149,15 @@ static void test_layouts(void) {
 #if UINTPTR_MAX == UINT64_MAX && SIZE_MAX == UINT64_MAX
   /* LP64 / LLP64: the layouts the Rust side's repr(C) gives, pinned. */
   CHECK(sizeof(rq_mesh_desc) == 40);
-  CHECK(sizeof(rq_build_options) == 80);
+  CHECK(sizeof(rq_build_options) == 96);
   CHECK(offsetof(rq_build_options, memory_limit) == 32);
   CHECK(offsetof(rq_build_options, on_error) == 40);
   CHECK(offsetof(rq_build_options, user) == 48);
   CHECK(offsetof(rq_build_options, memory_monitor) == 56);
   CHECK(offsetof(rq_build_options, memory_monitor_user) == 64);
   CHECK(offsetof(rq_build_options, budget_kind) == 72);
+  CHECK(offsetof(rq_build_options, clock) == 80);
+  CHECK(offsetof(rq_build_options, clock_user) == 88);
   CHECK(offsetof(rq_scene_report, triangle_count) == 16);
   CHECK(offsetof(rq_scene_report, memory_bytes) == 24);
   CHECK(offsetof(rq_scene_report, grid_resolution) == 32);

@@ -334,6 +334,9 @@ typedef void (*rq_error_fn)(void *user, rq_status status, const char *message);
 // returns true to allow it, false to cancel the build.
 typedef bool (*rq_memory_monitor_fn)(void *user, size_t bytes_about_to_be_held);
 
+// A clock: nanoseconds that never go back (its epoch is free: only differences are used).
+typedef uint64_t (*rq_clock_fn)(void *user);
+
 // Build options. Fill with `rq_build_options_init`, then change what you need. The library reads
 // only the fields that `struct_size` covers, so a program built against an older header keeps working.
 typedef struct rq_build_options {
@@ -365,6 +368,18 @@ typedef struct rq_build_options {
   rq_budget_kind budget_kind;
   // The quality of any kd-tree the scene builds (DEFAULT, FAST, HIGH), forced or chosen by AUTO.
   rq_kd_quality kd_quality;
+  // The clock by which AUTO's check after a kd-tree build times your rays on both structures
+  // (nanoseconds that never go back; only differences on one thread are used): `sample_rays`,
+  // and the queries `rq_scene_update` tapped. The library's own sample rays are priced from their
+  // counted work instead, by prices fitted to them. `rq_build_options_init` sets the library's
+  // own clock (this thread's CPU time) where it has one; NULL prices every check, which is
+  // deterministic but blind to what your rays cost beyond their counts (on diffuse bounces the
+  // prices keep a slower kd-tree on most scenes). Called on the thread that builds or updates
+  // the scene; must not call rayq. Kept by the scene for `rq_scene_update`, so it and
+  // `clock_user` must stay valid as long as the scene.
+  rq_clock_fn clock;
+  // Passed to `clock`.
+  void *clock_user;
 } rq_build_options;
 
 #if defined(RQ_WITH_OBJ)
@@ -647,7 +662,8 @@ void rq_obj_free(struct rq_obj *obj);
 rq_status rq_set_panic_hook(rq_panic_hook_fn hook, void *user);
 
 // Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-// no error callback, no memory monitor. Does nothing when `opts` is NULL.
+// no error callback, no memory monitor, the library's clock (none in a build without `std`). Does
+// nothing when `opts` is NULL.
 //
 // # Safety
 // `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
@@ -659,7 +675,8 @@ void rq_build_options_init(struct rq_build_options *opts);
 //
 // # Safety
 // Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read. A
-// `memory_monitor` and its user pointer stay valid for as long as the scene lives.
+// `memory_monitor` and a `clock`, with their user pointers, stay valid for as long as the scene
+// lives.
 rq_status rq_scene_build(const struct rq_mesh_desc *mesh,
                          const struct rq_build_options *opts,
                          const struct rq_calibration *calib,

@@ -9,6 +9,7 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
+use rayq::select::clock::Clock;
 use rayq::{procedural, BuildError, BuildOptions, Calibration, Scene, Structure};
 
 /// Passes every request to the system allocator, except that on a thread where it is armed it
@@ -115,22 +116,44 @@ fn armed<T>(
     (text, REFUSED.with(Cell::get), COUNT.with(Cell::get), live)
 }
 
-fn options(structure: Structure, expected_rays: u64, memory_limit: usize) -> BuildOptions {
+/// The options of a build under test. The clock, when there is one, is stopped (it always reads
+/// the same), so that the timed check's verdict, and with it the allocations, repeat exactly.
+fn options(
+    structure: Structure,
+    expected_rays: u64,
+    memory_limit: usize,
+    timed: bool,
+) -> BuildOptions {
     BuildOptions {
         structure,
         expected_rays,
         memory_limit,
+        clock: timed.then_some(STOPPED_CLOCK),
         ..BuildOptions::DEFAULT
     }
 }
 
+extern "C" fn stopped(_user: *mut core::ffi::c_void) -> u64 {
+    7
+}
+
+// SAFETY: `stopped` ignores its pointer, is callable from any thread and cannot unwind.
+const STOPPED_CLOCK: Clock = unsafe { Clock::new(stopped, core::ptr::null_mut()) };
+
 /// The builds under test: every structure choice, and Auto both ways (a large known budget makes
-/// it build the grid, sample, build the kd-tree and check it).
-const BUILDS: [(&str, Structure, u64); 4] = [
-    ("grid", Structure::Grid, 0),
-    ("kd-tree", Structure::KdTree, 0),
-    ("auto, unknown budget", Structure::Auto, 0),
-    ("auto, 1e9 rays", Structure::Auto, 1_000_000_000),
+/// it build the grid, sample, build the kd-tree and check it: by counted work, or timed by a
+/// stopped clock, whose tie drops the kd-tree and builds the grid again).
+const BUILDS: [(&str, Structure, u64, bool); 5] = [
+    ("grid", Structure::Grid, 0, false),
+    ("kd-tree", Structure::KdTree, 0, false),
+    ("auto, unknown budget", Structure::Auto, 0, false),
+    ("auto, 1e9 rays", Structure::Auto, 1_000_000_000, false),
+    (
+        "auto, 1e9 rays, timed",
+        Structure::Auto,
+        1_000_000_000,
+        true,
+    ),
 ];
 
 #[test]
@@ -139,8 +162,8 @@ fn every_refused_allocation_is_out_of_memory_and_leaks_nothing() {
     let mut data = procedural::closed_sphere(4);
     data.append(&procedural::random_slivers(40, 3));
     let calibration = Calibration::builtin();
-    for (label, structure, rays) in BUILDS {
-        let opts = options(structure, rays, 0);
+    for (label, structure, rays, timed) in BUILDS {
+        let opts = options(structure, rays, 0, timed);
         let build = || Scene::build(&data.as_source(), &opts, calibration);
         let (ok, _, total, live) = armed(None, build, |r| format!("{:?}", r.is_ok()));
         assert_eq!(ok, "true", "{label}: the unarmed build must succeed");
@@ -172,13 +195,13 @@ fn every_refused_allocation_is_out_of_memory_and_leaks_nothing() {
 fn memory_limit_sweep_fits_or_refuses() {
     let data = procedural::by_name("stadium", 2000).unwrap();
     let calibration = Calibration::builtin();
-    for (label, structure, rays) in BUILDS {
+    for (label, structure, rays, timed) in BUILDS {
         let mut limit = 1usize;
         let mut fitted = false;
         while limit < 64 << 20 {
             match Scene::build(
                 &data.as_source(),
-                &options(structure, rays, limit),
+                &options(structure, rays, limit, timed),
                 calibration,
             ) {
                 Ok(scene) => {

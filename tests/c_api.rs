@@ -32,6 +32,7 @@ const RUN_TIMEOUT: Duration = Duration::from_secs(300);
 const RUN_TESTS: &[&str] = &[
     "budget",
     "calibration",
+    "clock",
     "embedded",
     "geometries",
     "hostile_mesh",
@@ -376,6 +377,11 @@ fn c_kd_quality() {
 #[test]
 fn c_lifecycle() {
     run_c_test("lifecycle");
+}
+
+#[test]
+fn c_clock() {
+    run_c_test("clock");
 }
 
 #[test]

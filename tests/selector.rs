@@ -24,11 +24,50 @@ fn kd_friendly() -> rayq::mesh::MeshData {
     rayq::procedural::by_name("tetra", 4000).unwrap()
 }
 
+/// `Auto` with the check after a kd-tree build priced from counted work (no clock), so that the
+/// outcomes below follow from the calibrations alone; the timed check has tests of its own, with
+/// scripted clocks (`scripted`).
 fn auto(expected_rays: u64) -> BuildOptions {
     BuildOptions {
         structure: Structure::Auto,
         expected_rays,
+        clock: None,
         ..BuildOptions::DEFAULT
+    }
+}
+
+/// A clock whose `n`-th reading (from 1) is `n·n` when `slower_later`, else `1000·n − n·n`: the
+/// later of two timed passes (the kd-tree's, after the grid's) then takes longer, or less long.
+unsafe extern "C" fn scripted_reading(user: *mut core::ffi::c_void) -> u64 {
+    // SAFETY: `scripted` passes a pointer to a live `Script`.
+    let script = unsafe { &*(user as *const Script) };
+    let n = script
+        .readings
+        .fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+        + 1;
+    if script.slower_later {
+        n * n
+    } else {
+        1000 * n - n * n
+    }
+}
+
+/// What [`scripted_reading`] reads: how many readings so far, and which way it leans.
+struct Script {
+    readings: std::sync::atomic::AtomicU64,
+    slower_later: bool,
+}
+
+/// `auto(expected_rays)` with a clock reading `script` (which must outlive every scene built with
+/// the options).
+fn scripted(expected_rays: u64, script: &Script) -> BuildOptions {
+    // SAFETY: `scripted_reading` only reads the `Script`, which the caller keeps alive.
+    let clock = unsafe {
+        rayq::select::clock::Clock::new(scripted_reading, script as *const Script as *mut _)
+    };
+    BuildOptions {
+        clock: Some(clock),
+        ..auto(expected_rays)
     }
 }
 
@@ -701,4 +740,81 @@ fn a_heavy_grid_cell_keeps_the_kd_tree_whatever_the_samples_say() {
         "W* {}",
         r.break_even_rays
     );
+}
+
+/// With a clock, the check after a kd-tree build compares the two structures' times on the caller's
+/// sample rays: the kd-tree the estimate chose goes when the clock says it took longer, and stays
+/// when it says it took less, whatever the counted work says (the soup's kd-tree, which the priced
+/// check drops, is kept by a clock that favours it). Two passes are timed (grid, then kd-tree), two
+/// readings each. The library's own samples are priced and the clock is not read.
+#[test]
+fn a_timed_check_keeps_the_kd_tree_only_if_the_clock_says_it_is_faster() {
+    let outcome = |data: &rayq::mesh::MeshData, c: &Calibration, slower_later: bool, own: bool| {
+        let script = Script {
+            readings: std::sync::atomic::AtomicU64::new(0),
+            slower_later,
+        };
+        let options = scripted(u64::MAX / 4, &script);
+        let samples = test_rays(&mesh_of(data), 24, 0, 8);
+        let given: Option<&dyn rayq::select::sample::RaySource> = (!own).then_some(&samples);
+        let r = Scene::build_with_samples(&data.as_source(), &options, c, given)
+            .unwrap()
+            .report();
+        let readings = script.readings.into_inner();
+        assert_eq!(readings, if own { 0 } else { 4 });
+        (r.structure, r.outcome)
+    };
+    let tetra = kd_friendly();
+    let fast_kd = calibration(100.0, 10_000.0);
+    let kept = (Structure::KdTree, Outcome::AboveBreakEven);
+    let dropped = (Structure::Grid, Outcome::GridFasterPerRay);
+    assert_eq!(outcome(&tetra, &fast_kd, true, false), dropped);
+    assert_eq!(outcome(&tetra, &fast_kd, false, false), kept);
+    let soup = rayq::procedural::by_name("soup", 2000).unwrap();
+    let cheap = calibration(1.0, 0.01);
+    assert_eq!(outcome(&soup, &cheap, false, false), kept);
+    assert_eq!(outcome(&soup, &cheap, true, false), dropped);
+    // The library's samples: priced, whatever the clock would say.
+    assert_eq!(outcome(&tetra, &fast_kd, true, true), kept);
+    assert_eq!(outcome(&soup, &cheap, false, true), dropped);
+}
+
+/// The online switch's check is timed on the tapped queries: once two batches of them ask for the
+/// kd-tree, it is built and kept only if the clock says those rays took it less time than the grid
+/// (and when it does not, the scene stays on the grid for good).
+#[test]
+fn the_online_switch_keeps_a_kd_tree_the_clock_finds_slower_out() {
+    let data = kd_friendly();
+    let c = calibration(100.0, 10.0);
+    // About one query in 64 is tapped: 20 000 give the tap the 256 it needs to be heard.
+    let rays = test_rays(&mesh_of(&data), 140, 0, 9);
+    for slower_later in [true, false] {
+        let script = Script {
+            readings: std::sync::atomic::AtomicU64::new(0),
+            slower_later,
+        };
+        let mut scene = Scene::build(&data.as_source(), &scripted(0, &script), &c).unwrap();
+        for _ in 0..2 {
+            for r in &rays {
+                scene.intersect(r);
+            }
+            scene.update(rays.len() as u64, 0).unwrap();
+        }
+        let r = scene.report();
+        if slower_later {
+            assert_eq!(
+                (r.structure, r.outcome),
+                (Structure::Grid, Outcome::OnlineOnGrid)
+            );
+            scene.update(u64::MAX / 2, 0).unwrap();
+            assert_eq!(scene.report().structure, Structure::Grid);
+        } else {
+            assert_eq!(
+                (r.structure, r.outcome),
+                (Structure::KdTree, Outcome::OnlineSwitched)
+            );
+        }
+        drop(scene);
+        assert_eq!(script.readings.into_inner(), 4);
+    }
 }

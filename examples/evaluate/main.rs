@@ -28,9 +28,10 @@ use std::path::PathBuf;
 
 use rayq::mesh::MeshData;
 use rayq::select::calibration::BUILTIN_VARIANT;
+use rayq::select::clock::Clock;
 use rayq::select::decision::{
-    kd_tree_confirmed, kd_tree_confirmed_at, kd_tree_work_limit, CheckPrices, CostEstimate,
-    TRIAL_SHARE,
+    kd_tree_confirmed, kd_tree_confirmed_at, kd_tree_confirmed_timed, kd_tree_work_limit,
+    CheckPrices, CostEstimate, TRIAL_SHARE,
 };
 use rayq::select::fit::{fit_check_prices, CheckObservation, Observation};
 use rayq::select::measure::{
@@ -38,7 +39,9 @@ use rayq::select::measure::{
 };
 use rayq::select::model::Part;
 use rayq::select::model::SceneFeatures;
-use rayq::select::sample::{sample_grid, sample_kdtree, SampleParams, UNKNOWN_BUDGET_SIDE};
+use rayq::select::sample::{
+    sample_grid, sample_kdtree, time_samples, RaySource, SampleParams, UNKNOWN_BUDGET_SIDE,
+};
 use rayq::select::validate::{
     best_variant, cross_validated_break_even, cross_validated_errors,
     cross_validated_estimates_for, median, relative_error, GridCost, VARIANTS,
@@ -210,6 +213,19 @@ struct Measured {
     /// The workload's camera rays and its bounces timed apart: (kd-tree, grid) ns per ray for
     /// each kind (medians of the repeats, thread CPU time); `None` where a kind has no rays.
     by_kind: [Option<(f64, f64)>; 2],
+    /// Per sample side, the timed check's two passes: (grid, kd-tree) ns for all the samples.
+    timed_samples: Vec<(f64, f64)>,
+    /// The check on a sixteenth of the workload's bounces passed as the caller's samples (`None`
+    /// where nothing is hit).
+    bounce_check: Option<BounceCheck>,
+}
+
+/// The check after a kd-tree build on bounce samples: both structures' counts and times.
+struct BounceCheck {
+    grid: SceneFeatures,
+    kd: SceneFeatures,
+    grid_ns: f64,
+    kd_ns: f64,
 }
 
 /// The accuracy check: its rays, their exact answers, and whether the mesh is closed.
@@ -261,20 +277,6 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     let (obs, spread) = observe_rays(&mesh, &rays, params).ok()?;
     let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut MemoryBudget::new(0)).ok()?;
     let tree = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).ok()?;
-    let timed = |f: &dyn Fn(&SampleParams) -> SceneFeatures| -> Vec<(SceneFeatures, f64)> {
-        SAMPLE_SIDES
-            .iter()
-            .map(|&side| {
-                let p = SampleParams {
-                    camera_side: side,
-                    ..SampleParams::DEFAULT
-                };
-                let t = thread_seconds();
-                let features = f(&p);
-                (features, (thread_seconds() - t) * 1e9)
-            })
-            .collect()
-    };
     // The workload is its camera rays (side²) followed by their bounces.
     let camera = (params.workload_side as usize).pow(2).min(rays.len());
     let per_ray_ns = |q: &dyn rayq::RayQuery, part: &[rayq::Ray]| {
@@ -282,8 +284,41 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     };
     let by_kind = [&rays[..camera], &rays[camera..]]
         .map(|part| (!part.is_empty()).then(|| (per_ray_ns(&tree, part), per_ray_ns(&grid, part))));
-    let samples = timed(&|p| sample_grid(&grid, &mesh, None, p));
-    let kd_samples = timed(&|p| sample_kdtree(&tree, &mesh, None, p));
+    // Per sample side, as a scene does it: the grid's counted pass (the estimate's features) and
+    // right after it the grid's timed pass (what a scene with a clock times before a kd-tree
+    // build), then the kd-tree's counted pass (the priced check) and its timed pass (the timed
+    // check). The counted passes are timed too (the sampling's and the priced check's cost).
+    let clock = Clock::THREAD;
+    let (mut samples, mut kd_samples, mut timed_samples) = (Vec::new(), Vec::new(), Vec::new());
+    for &side in &SAMPLE_SIDES {
+        let p = SampleParams {
+            camera_side: side,
+            ..SampleParams::DEFAULT
+        };
+        let (grid_counted, g) = clock.time(|| sample_grid(&grid, &mesh, None, &p));
+        let grid_ns = time_samples(&grid, &mesh, None, &p, &clock);
+        let (kd_counted, k) = clock.time(|| sample_kdtree(&tree, &mesh, None, &p));
+        let kd_ns = time_samples(&tree, &mesh, None, &p, &clock);
+        samples.push((g, grid_counted as f64));
+        kd_samples.push((k, kd_counted as f64));
+        timed_samples.push((grid_ns as f64, kd_ns as f64));
+    }
+    // A renderer that passes its own diffuse bounces as samples: every 16th of the workload's.
+    let bounce_samples: Vec<rayq::Ray> = rays[camera..].iter().step_by(16).copied().collect();
+    let bounce_check = (!bounce_samples.is_empty()).then(|| {
+        let src: Option<&dyn RaySource> = Some(&bounce_samples);
+        let p = SampleParams::DEFAULT;
+        let g = sample_grid(&grid, &mesh, src, &p);
+        let grid_ns = time_samples(&grid, &mesh, src, &p, &clock);
+        let k = sample_kdtree(&tree, &mesh, src, &p);
+        let kd_ns = time_samples(&tree, &mesh, src, &p, &clock);
+        BounceCheck {
+            grid: g,
+            kd: k,
+            grid_ns: grid_ns as f64,
+            kd_ns: kd_ns as f64,
+        }
+    });
     let limit = kd_tree_work_limit(mesh.len() - mesh.degenerate_count());
     let abandoned_s = (tree.build_work() > limit).then(|| {
         let mut times: Vec<f64> = (0..params.repeats.max(1))
@@ -360,6 +395,8 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
         rayq_accuracy,
         peers,
         by_kind,
+        timed_samples,
+        bounce_check,
     })
 }
 
@@ -717,6 +754,77 @@ fn check_section(md: &mut String, results: &[Measured]) {
         loo.len(),
         loo.iter().sum::<f64>()
     );
+    // The timed check (the library's with a clock): both structures' time on the same samples.
+    let timed_loss: Vec<(f64, &str)> = results
+        .iter()
+        .map(|m| {
+            let (g_ns, k_ns) = m.timed_samples[k];
+            let keeps_kd = kd_tree_confirmed_timed(&m.samples[k].0, g_ns as u64, k_ns as u64);
+            let (g, kd) = (m.obs.grid_ray_ns, m.obs.kd_ray_ns);
+            (
+                (if keeps_kd { kd } else { g }) / g.min(kd) - 1.0,
+                m.name.as_str(),
+            )
+        })
+        .collect();
+    let worst = timed_loss
+        .iter()
+        .copied()
+        .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
+    let _ = writeln!(
+        md,
+        "| timed by the clock (what the library does for the caller's rays, not its own) | {} of {} | {:.3} | {} {:.1} % |",
+        timed_loss.iter().filter(|l| l.0 == 0.0).count(),
+        results.len(),
+        timed_loss.iter().map(|l| l.0).sum::<f64>(),
+        worst.1,
+        100.0 * worst.0
+    );
+    // A renderer that passes its own bounces as samples (the README's advice for bounce-heavy
+    // work): every 16th of the workload's bounces, judged against the bounces' measured times.
+    let judged: Vec<(&BounceCheck, f64)> = results
+        .iter()
+        .filter_map(|m| {
+            let b = m.bounce_check.as_ref()?;
+            let (kd, grid) = m.by_kind[1]?;
+            Some((b, kd / grid))
+        })
+        .collect();
+    let mut right = [0usize; 2];
+    let mut lost = [0.0f64; 2];
+    for (b, ratio) in &judged {
+        let verdicts = [
+            kd_tree_confirmed(calibration, &b.grid, &b.kd),
+            kd_tree_confirmed_timed(&b.grid, b.grid_ns as u64, b.kd_ns as u64),
+        ];
+        for (j, keeps_kd) in verdicts.into_iter().enumerate() {
+            right[j] += usize::from(keeps_kd == (*ratio < 1.0));
+            lost[j] += if keeps_kd {
+                ratio.max(1.0)
+            } else {
+                (1.0 / ratio).max(1.0)
+            } - 1.0;
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nThe same check when the samples are the renderer's diffuse bounces (every 16th of the \
+         workload's, passed as the caller's sample rays; median {} rays), against the bounces' \
+         measured times (section \"Camera rays and bounces apart\"):\n\n\
+         | check | keeps the faster | loss |\n|---|---:|---:|\n\
+         | priced (the library's prices; the library without a clock) | {} of {} | {:.3} |\n\
+         | timed (the library with a clock) | {} of {} | {:.3} |",
+        {
+            let mut n: Vec<f64> = judged.iter().map(|j| j.0.grid.rays as f64).collect();
+            median(&mut n)
+        },
+        right[0],
+        judged.len(),
+        lost[0],
+        right[1],
+        judged.len(),
+        lost[1]
+    );
 }
 
 /// Issue 14's goal for the worst regret (AUTO / oracle) over the scenes and known budgets.
@@ -771,33 +879,44 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     // estimates `loo` (per sample side, per scene: the library's variant, or another for the
     // variants table); `selector_with` takes the side the library uses for budget `r` (0 =
     // unknown).
-    let selector_at = |loo: &[Vec<CostEstimate>], k: usize, i: usize| {
+    // The check on the library's samples as a scene makes it: `priced` from the kd-tree's counted
+    // work (even with a clock: `BuildOptions::clock`); or, for comparison, timed on both structures.
+    let selector_by = |loo: &[Vec<CostEstimate>], k: usize, i: usize, priced: bool| {
         let m = &results[i];
-        Selector {
-            estimate: loo[k][i],
-            sample_s: m.samples[k].1 * 1e-9,
-            confirmed: kd_tree_confirmed(
+        let (grid_ns, kd_ns) = m.timed_samples[k];
+        let (confirmed, check_ns) = if priced {
+            let keep = kd_tree_confirmed(
                 rayq::Calibration::builtin(),
                 &m.samples[k].0,
                 &m.kd_samples[k].0,
-            ),
-            check_s: m.kd_samples[k].1 * 1e-9,
+            );
+            (keep, m.kd_samples[k].1)
+        } else {
+            let keep = kd_tree_confirmed_timed(&m.samples[k].0, grid_ns as u64, kd_ns as u64);
+            (keep, grid_ns + kd_ns)
+        };
+        Selector {
+            estimate: loo[k][i],
+            sample_s: m.samples[k].1 * 1e-9,
+            confirmed,
+            check_s: check_ns * 1e-9,
             abandoned_s: m.abandoned_s,
         }
     };
+    let selector_at = |loo: &[Vec<CostEstimate>], k: usize, i: usize| selector_by(loo, k, i, true);
     let selector_with =
         |loo: &[Vec<CostEstimate>], i: usize, r: f64| selector_at(loo, side_index(r), i);
     let selector = |i: usize, r: f64| selector_with(&loo_by_side, i, r);
-    // Regret (AUTO / oracle) over the scenes and known budgets with the estimates `loo`: the
-    // geometric mean, the worst and where.
-    let regret_with = |loo: &[Vec<CostEstimate>]| {
+    // Regret (AUTO / oracle) over the scenes and known budgets with the estimates `loo` and the
+    // check timed or `priced`: the geometric mean, the worst and where.
+    let regret_by = |loo: &[Vec<CostEstimate>], priced: bool| {
         let (mut q, mut worst) = (Vec::new(), (1.0f64, String::new()));
         for (i, m) in results.iter().enumerate() {
             for r in budgets() {
                 let t = totals(
                     &m.obs,
-                    &selector_with(loo, i, r),
-                    &selector_with(loo, i, 0.0),
+                    &selector_by(loo, side_index(r), i, priced),
+                    &selector_by(loo, side_index(0.0), i, priced),
                     r,
                     TRIAL_SHARE,
                 );
@@ -810,6 +929,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         }
         (geomean(&q), worst)
     };
+    let regret_with = |loo: &[Vec<CostEstimate>]| regret_by(loo, true);
     let at_share = |i: usize, r: f64, share: f64| {
         totals(
             &results[i].obs,
@@ -982,6 +1102,12 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         md,
         "| unknown budget (online switch), worst ({}) | {:.3} | ≤ 1.8 |",
         worst_unknown.1, worst_unknown.0
+    );
+    let (timed_mean, timed_worst) = regret_by(&loo_by_side, false);
+    let _ = writeln!(
+        md,
+        "| the same regret were the check on the library's samples timed (it is priced): geometric mean, worst ({}) | {:.3}, {:.3} | |",
+        timed_worst.1, timed_mean, timed_worst.0
     );
     let _ = writeln!(
         md,

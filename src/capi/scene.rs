@@ -14,10 +14,12 @@ use crate::mesh::MeshSource;
 use crate::ray::{Hit, Ray};
 use crate::scene::{BudgetKind, BuildOptions, Outcome, Scene, Structure};
 use crate::select::calibration::Calibration;
+use crate::select::clock::Clock;
 use crate::select::sample::RaySource;
 
 /// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-/// no error callback, no memory monitor. Does nothing when `opts` is NULL.
+/// no error callback, no memory monitor, the library's clock (none in a build without `std`). Does
+/// nothing when `opts` is NULL.
 ///
 /// # Safety
 /// `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
@@ -42,10 +44,21 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
                 memory_monitor_user: ptr::null_mut(),
                 budget_kind: rq_budget_kind::RQ_BUDGET_EXPECTED,
                 kd_quality: rq_kd_quality::RQ_KD_QUALITY_DEFAULT,
+                clock: DEFAULT_CLOCK,
+                clock_user: ptr::null_mut(),
             })
         }
     })
 }
+
+/// The clock `rq_build_options_init` sets, and a caller's `struct_size` that stops short of `clock`
+/// gets: the library's ([`crate::select::clock::Clock::THREAD`]) in `std` builds, none without.
+#[cfg(feature = "std")]
+const DEFAULT_CLOCK: rq_clock_fn = Some(crate::select::clock::thread_clock);
+/// The clock `rq_build_options_init` sets, and a caller's `struct_size` that stops short of `clock`
+/// gets: the library's ([`crate::select::clock::Clock::THREAD`]) in `std` builds, none without.
+#[cfg(not(feature = "std"))]
+const DEFAULT_CLOCK: rq_clock_fn = None;
 
 /// Options as read from C, with the defaults for fields the caller's `struct_size` does not cover.
 struct Options {
@@ -59,6 +72,7 @@ struct Options {
     on_error: rq_error_fn,
     user: *mut core::ffi::c_void,
     memory_monitor: Option<MemoryMonitor>,
+    clock: Option<Clock>,
 }
 
 /// Reads field `$field` of an `rq_build_options` at `$p` when `$size` covers it, else `$default`.
@@ -86,6 +100,7 @@ unsafe fn read_options(
         on_error: None,
         user: ptr::null_mut(),
         memory_monitor: None,
+        clock: Clock::DEFAULT,
     };
     if p.is_null() {
         return Ok(o);
@@ -154,6 +169,11 @@ unsafe fn read_options(
     // SAFETY: rq_scene_build's contract: the callback is callable with its user pointer for as long
     // as the scene lives, on the threads that build or update it.
     o.memory_monitor = monitor.map(|f| unsafe { MemoryMonitor::new(f, monitor_user) });
+    let clock = read_covered!(p, size, clock, rq_clock_fn, DEFAULT_CLOCK);
+    let clock_user = read_covered!(p, size, clock_user, *mut core::ffi::c_void, ptr::null_mut());
+    // SAFETY: rq_scene_build's contract: the clock is callable with its user pointer for as long as
+    // the scene lives, on the threads that build or update it.
+    o.clock = clock.map(|f| unsafe { Clock::new(f, clock_user) });
     if o.sample_rays.is_null() && o.sample_ray_count != 0 {
         return Err((
             rq_status::RQ_STATUS_NULL_ARGUMENT,
@@ -270,7 +290,8 @@ fn report_error(o: &Options, status: rq_status, message: &Message) -> rq_status 
 ///
 /// # Safety
 /// Pointers are NULL or valid for the sizes their counts imply; the mesh arrays are only read. A
-/// `memory_monitor` and its user pointer stay valid for as long as the scene lives.
+/// `memory_monitor` and a `clock`, with their user pointers, stay valid for as long as the scene
+/// lives.
 #[no_mangle]
 pub unsafe extern "C" fn rq_scene_build(
     mesh: *const rq_mesh_desc,
@@ -357,6 +378,7 @@ pub(super) unsafe fn build_scene(
         },
         memory_limit: o.memory_limit,
         memory_monitor: o.memory_monitor,
+        clock: o.clock,
         ..BuildOptions::DEFAULT
     };
     let samples = CallerRays {

@@ -189,7 +189,22 @@ pub struct rq_build_options {
     pub budget_kind: rq_budget_kind,
     /// The quality of any kd-tree the scene builds (DEFAULT, FAST, HIGH), forced or chosen by AUTO.
     pub kd_quality: rq_kd_quality,
+    /// The clock by which AUTO's check after a kd-tree build times your rays on both structures
+    /// (nanoseconds that never go back; only differences on one thread are used): `sample_rays`,
+    /// and the queries `rq_scene_update` tapped. The library's own sample rays are priced from their
+    /// counted work instead, by prices fitted to them. `rq_build_options_init` sets the library's
+    /// own clock (this thread's CPU time) where it has one; NULL prices every check, which is
+    /// deterministic but blind to what your rays cost beyond their counts (on diffuse bounces the
+    /// prices keep a slower kd-tree on most scenes). Called on the thread that builds or updates
+    /// the scene; must not call rayq. Kept by the scene for `rq_scene_update`, so it and
+    /// `clock_user` must stay valid as long as the scene.
+    pub clock: rq_clock_fn,
+    /// Passed to `clock`.
+    pub clock_user: *mut c_void,
 }
+
+/// A clock: nanoseconds that never go back (its epoch is free: only differences are used).
+pub type rq_clock_fn = Option<unsafe extern "C" fn(user: *mut c_void) -> u64>;
 
 /// Memory monitor: told the bytes a build would hold after the allocation it is about to make;
 /// returns true to allow it, false to cancel the build.

@@ -7,11 +7,13 @@ use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::select::calibration::Calibration;
+use crate::select::clock::Clock;
 use crate::select::decision::{
-    kd_tree_confirmed, kd_tree_work_limit, CostEstimate, Decision, OnlineSwitch,
+    kd_tree_confirmed, kd_tree_confirmed_timed, kd_tree_work_limit, CostEstimate, Decision,
+    OnlineSwitch,
 };
 use crate::select::model::SceneFeatures;
-use crate::select::sample::{sample_grid, sample_kdtree, RaySource};
+use crate::select::sample::{sample_grid, sample_kdtree, time_samples, RaySource, SampleParams};
 
 /// What the selection built and what it learnt on the way.
 pub(super) struct Choice {
@@ -83,15 +85,26 @@ pub(super) fn choose(
         (bound, BudgetKind::AtMost) => bound,
     };
     if outcome == Outcome::AboveBreakEven {
+        // With a clock and the caller's samples, the grid's time on them for the check, while it
+        // is warm from them (the library's own samples are priced: see `BuildOptions::clock`).
+        let clock = options.clock.as_ref().filter(|_| samples.is_some());
+        let grid_ns = clock.map(|c| time_samples(grid, mesh, samples, &sample_params, c));
         // The grid goes first, so the limit need hold only the mesh and the kd-tree.
         accel.release(budget);
         let limit = kd_tree_work_limit(features.triangles);
         let kept = match KdTree::build_within(mesh, &options.kdtree, budget, limit)? {
-            // The check (see `kd_tree_confirmed`): a kd-tree that does not save work on the same
-            // sample rays goes.
+            // The check: a kd-tree that is not faster on the same sample rays goes.
             Some(tree) => {
-                let kd = sample_kdtree(&tree, mesh, samples, &sample_params);
-                if kd_tree_confirmed(calibration, &features, &kd) {
+                let timed = clock.zip(grid_ns);
+                if keeps_kd_tree(
+                    &tree,
+                    mesh,
+                    calibration,
+                    &features,
+                    timed,
+                    samples,
+                    &sample_params,
+                ) {
                     Some(tree)
                 } else {
                     Accel::KdTree(tree).release(budget);
@@ -118,4 +131,27 @@ pub(super) fn choose(
             .then(|| OnlineSwitch::at_most(estimate, max_rays)),
         grid_samples: samples.is_none().then_some(features),
     })
+}
+
+/// The check after a kd-tree build, on the sample rays `rays` (or the library's per `params`) that
+/// gave `grid` on the grid: with `timed` (the scene's clock and the grid's time on those rays by
+/// it), the kd-tree is kept only if they take it less time ([`kd_tree_confirmed_timed`]); without,
+/// only if their counted work on it, priced, is below the grid's ([`kd_tree_confirmed`]).
+pub(super) fn keeps_kd_tree(
+    tree: &KdTree,
+    mesh: &TriMesh,
+    calibration: &Calibration,
+    grid: &SceneFeatures,
+    timed: Option<(&Clock, u64)>,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+) -> bool {
+    if let Some((clock, grid_ns)) = timed {
+        let kd_ns = time_samples(tree, mesh, rays, params, clock);
+        return kd_tree_confirmed_timed(grid, grid_ns, kd_ns);
+    }
+    let kd = sample_kdtree(tree, mesh, rays, params);
+    // The same rays on both structures, whose answers are the same.
+    debug_assert_eq!((kd.rays, kd.hits), (grid.rays, grid.hits));
+    kd_tree_confirmed(calibration, grid, &kd)
 }

@@ -11,14 +11,15 @@ use crate::geometry::{Conditions, Geometry, HitEx, RayEx, Visibility};
 use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
-use crate::select::decision::{kd_tree_confirmed, kd_tree_work_limit, CostEstimate, OnlineSwitch};
+use crate::select::clock::Clock;
+use crate::select::decision::{kd_tree_work_limit, CostEstimate, OnlineSwitch};
 use crate::select::model::SceneFeatures;
-use crate::select::sample::{sample_grid, sample_kdtree, RaySource, SampleParams};
+use crate::select::sample::{sample_grid, time_samples, RaySource, SampleParams};
 
 mod choose;
 mod tap;
 
-use choose::choose;
+use choose::{choose, keeps_kd_tree};
 pub use tap::TAP_RAYS;
 use tap::{QueryTap, TAP_MIN_RAYS};
 
@@ -89,6 +90,15 @@ pub struct BuildOptions {
     /// Told the bytes the build would hold before each allocation of a build (including the one in
     /// [`Scene::update`]); a refusal fails it with [`BuildError::Cancelled`]. Default none.
     pub memory_monitor: Option<MemoryMonitor>,
+    /// The clock by which the check after a kd-tree build (`Auto` only) times the caller's rays on
+    /// both structures ([`crate::select::decision::kd_tree_confirmed_timed`]): the sample rays
+    /// given to [`Scene::build_with_samples`], and the tapped queries in [`Scene::update`]. The
+    /// library's own samples are always priced from their counted work, by prices fitted to them
+    /// ([`crate::select::decision::CheckPrices::LIBRARY`]); for other rays no prices are known to
+    /// hold (on diffuse bounces they keep a slower kd-tree on most scenes), so they are timed.
+    /// `None` prices every check, deterministically. Default [`Clock::DEFAULT`]: this thread's CPU
+    /// time in `std` builds, none without.
+    pub clock: Option<Clock>,
 }
 
 impl BuildOptions {
@@ -102,6 +112,7 @@ impl BuildOptions {
         kdtree: KdTreeParams::DEFAULT,
         samples: SampleParams::DEFAULT,
         memory_monitor: None,
+        clock: Clock::DEFAULT,
     };
 }
 
@@ -584,6 +595,20 @@ impl Scene {
         if !switch {
             return Ok(());
         }
+        let clock = self.options.clock;
+        // With a clock, the grid's time on the tapped rays the check will use, taken before the
+        // kd-tree's build takes the caches (right after they were traced through it). The
+        // library's own samples are priced (see `BuildOptions::clock`).
+        let grid_ns = match (clock.as_ref(), &self.accel, &tapped, &mut self.tap) {
+            (Some(c), Accel::Grid(g), Some(_), Some(tap)) => Some(time_samples(
+                g,
+                &self.mesh,
+                Some(&tap.rays()),
+                &self.options.samples,
+                c,
+            )),
+            _ => None,
+        };
         let mut budget = self.options.budget();
         budget.charge(self.memory_bytes(), "the scene's mesh and grid")?;
         let limit = kd_tree_work_limit(self.mesh.len() - self.mesh.degenerate_count());
@@ -595,20 +620,27 @@ impl Scene {
             self.tap = None;
             return Ok(());
         };
-        // The check on the rays the estimate came from: the tapped ones, or the library's.
+        // The check on the rays the estimate came from: the tapped ones (timed, with a clock), or
+        // the library's (the same as the grid's at the build: the budget's image side).
         let checked = match (&tapped, &mut self.tap, &self.grid_samples) {
-            (Some(grid), Some(tap), _) => {
-                let kd = sample_kdtree(&tree, &self.mesh, Some(&tap.rays()), &self.options.samples);
-                kd_tree_confirmed(&self.calibration, grid, &kd)
-            }
-            (_, _, Some(grid)) => {
-                // The same library samples as the grid's at the build (the budget's image side).
-                let params = self.options.samples.for_budget(self.options.expected_rays);
-                let kd = sample_kdtree(&tree, &self.mesh, None, &params);
-                // The same rays on both structures, whose answers are the same.
-                debug_assert_eq!((kd.rays, kd.hits), (grid.rays, grid.hits));
-                kd_tree_confirmed(&self.calibration, grid, &kd)
-            }
+            (Some(grid), Some(tap), _) => keeps_kd_tree(
+                &tree,
+                &self.mesh,
+                &self.calibration,
+                grid,
+                clock.as_ref().zip(grid_ns),
+                Some(&tap.rays()),
+                &self.options.samples,
+            ),
+            (_, _, Some(grid)) => keeps_kd_tree(
+                &tree,
+                &self.mesh,
+                &self.calibration,
+                grid,
+                None,
+                None,
+                &self.options.samples.for_budget(self.options.expected_rays),
+            ),
             _ => true,
         };
         if !checked {

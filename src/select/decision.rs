@@ -222,6 +222,19 @@ pub fn kd_tree_confirmed(
     kd_tree_confirmed_at(calibration, grid, kd, &CheckPrices::LIBRARY)
 }
 
+/// The check after a kd-tree build when the scene has a clock: keep the kd-tree only if the sample
+/// rays took it less time (`kd_ns`) than they took the grid (`grid_ns`, measured on the same rays
+/// as plain queries, [`crate::select::sample::time_samples`]), or if `grid`'s counts (from those
+/// rays) show a heavy cell, which the samples rarely enter (see [`kd_tree_confirmed`]); no samples
+/// confirm nothing to the contrary. Time sees what counted work does not: a node or a test costs
+/// more on rays that start on a surface in a random direction than on a camera's (the evaluation's
+/// bounces against its camera rays: the counts priced as [`kd_tree_confirmed`] prices them keep
+/// the faster structure on 7 of 31 scenes for bounce samples, the clock on 29; docs/design.md,
+/// "The check after the kd-tree is built").
+pub fn kd_tree_confirmed_timed(grid: &SceneFeatures, grid_ns: u64, kd_ns: u64) -> bool {
+    grid.rays == 0 || kd_ns < grid_ns || grid.has_heavy_cell()
+}
+
 /// [`kd_tree_confirmed`] with other prices, for the evaluation that fits them.
 pub fn kd_tree_confirmed_at(
     calibration: &Calibration,
@@ -406,19 +419,23 @@ mod tests {
         }
     }
 
-    /// The check keeps a kd-tree that its counts say is the dearer when the grid has a heavy
-    /// cell: at least 1 024 triangles and a sixteenth of the scene's, not one less.
-    #[test]
-    fn a_heavy_cell_keeps_the_kd_tree() {
-        let calibration = Calibration::builtin();
-        let feature = |triangles: usize, cells: u64, tests: u64, largest: u64| SceneFeatures {
+    /// 100 rays' features: `cells` and `tests` a ray, the grid's largest cell `largest`.
+    fn feature(triangles: usize, cells: u64, tests: u64, largest: u64) -> SceneFeatures {
+        SceneFeatures {
             triangles,
             rays: 100,
             cells: 100 * cells,
             tests: 100 * tests,
             grid_largest_cell: largest,
             ..SceneFeatures::default()
-        };
+        }
+    }
+
+    /// The check keeps a kd-tree that its counts say is the dearer when the grid has a heavy
+    /// cell: at least 1 024 triangles and a sixteenth of the scene's, not one less.
+    #[test]
+    fn a_heavy_cell_keeps_the_kd_tree() {
+        let calibration = Calibration::builtin();
         // Counts like the stadium's (stop 19: 2 cells and 8 tests against 10 nodes and 16 tests),
         // with a few more kd tests, so that the grid looks cheaper at any of the fitted prices.
         let kd = feature(1_000_000, 10, 24, 0);
@@ -478,6 +495,20 @@ mod tests {
         };
         // Grid work 4·3 + 2·20 = 52; kd-tree work 2·26 = 52.
         assert!(!kd_tree_confirmed_at(&cal, &grid, &same_tests, &tie));
+    }
+
+    /// The timed check keeps the kd-tree when it took strictly less time than the grid on the same
+    /// samples, when there were no samples, and whenever the grid has a heavy cell.
+    #[test]
+    fn the_timed_check_keeps_the_faster_unless_a_cell_is_heavy() {
+        let grid = feature(10_000, 2, 8, 0);
+        assert!(kd_tree_confirmed_timed(&grid, 1000, 999));
+        assert!(!kd_tree_confirmed_timed(&grid, 1000, 1000));
+        assert!(!kd_tree_confirmed_timed(&grid, 1000, 5000));
+        let heavy = feature(10_000, 2, 8, 1024);
+        assert!(kd_tree_confirmed_timed(&heavy, 1000, 5000));
+        let none = SceneFeatures { rays: 0, ..grid };
+        assert!(kd_tree_confirmed_timed(&none, 0, 0));
     }
 
     #[test]

@@ -2,7 +2,6 @@
 //! workload is camera rays plus one diffuse bounce per hit; times are medians of repeated runs, on
 //! the thread's CPU clock where Linux offers one (a shared VM's stolen time is then not counted).
 
-use std::time::Instant;
 use std::vec::Vec;
 
 use super::fit::Observation;
@@ -47,38 +46,10 @@ impl MeasureParams {
 }
 
 /// Seconds this thread has run on a CPU (`CLOCK_THREAD_CPUTIME_ID`, so time stolen by a shared VM
-/// or spent in other threads does not count), or wall time where that clock is missing.
+/// or spent in other threads does not count), or wall time where that clock is missing: the
+/// reading of [`super::clock::Clock::THREAD`].
 pub fn thread_seconds() -> f64 {
-    thread_cpu_seconds().unwrap_or_else(|| {
-        static START: std::sync::OnceLock<Instant> = std::sync::OnceLock::new();
-        START.get_or_init(Instant::now).elapsed().as_secs_f64()
-    })
-}
-
-#[cfg(target_os = "linux")]
-fn thread_cpu_seconds() -> Option<f64> {
-    use core::ffi::{c_int, c_long};
-    #[repr(C)]
-    struct Timespec {
-        tv_sec: c_long,
-        tv_nsec: c_long,
-    }
-    extern "C" {
-        fn clock_gettime(clock: c_int, tp: *mut Timespec) -> c_int;
-    }
-    const CLOCK_THREAD_CPUTIME_ID: c_int = 3;
-    let mut ts = Timespec {
-        tv_sec: 0,
-        tv_nsec: 0,
-    };
-    // SAFETY: clock_gettime writes one timespec to the pointer it is given, which is valid.
-    let ok = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0;
-    ok.then_some(ts.tv_sec as f64 + ts.tv_nsec as f64 * 1e-9)
-}
-
-#[cfg(not(target_os = "linux"))]
-fn thread_cpu_seconds() -> Option<f64> {
-    None
+    super::clock::thread_nanos() as f64 * 1e-9
 }
 
 /// A timing over repeats: median, fastest and slowest, nanoseconds.

@@ -2,6 +2,7 @@
 //! that feed it, the decision rule, and the fit that makes a calibration from measurements.
 
 pub mod calibration;
+pub mod clock;
 pub mod decision;
 pub mod fit;
 #[cfg(feature = "std")]

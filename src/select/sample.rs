@@ -3,10 +3,12 @@
 
 use crate::accel::grid::{GridWork, UniformGrid};
 use crate::accel::kdtree::{KdTree, KdWork};
+use crate::accel::RayQuery;
 use crate::mesh::TriMesh;
 use crate::ray::{Hit, Ray};
 use crate::workload::{bounce, bounce_offset, Camera, SplitMix64};
 
+use super::clock::Clock;
 use super::model::SceneFeatures;
 
 /// Rays a caller offers as representative of its workload.
@@ -143,16 +145,27 @@ fn sample_with(
         triangles: mesh.len() - mesh.degenerate_count(),
         ..SceneFeatures::default()
     };
-    let run = |ray: &Ray, f: &mut SceneFeatures| {
+    for_each_sample(mesh, rays, params, |ray| {
         let (hit, steps, tests) = trace(ray);
         f.add_ray(hit.is_hit(), steps, tests);
         hit
-    };
+    });
+    f
+}
+
+/// Calls `trace` on every sample ray in order: the caller's, or the library's per `params` (each
+/// camera ray, then its bounce from the hit `trace` returned).
+fn for_each_sample(
+    mesh: &TriMesh,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+    mut trace: impl FnMut(&Ray) -> Hit,
+) {
     if let Some(source) = rays {
         for i in 0..source.ray_count() {
-            run(&source.ray(i), &mut f);
+            trace(&source.ray(i));
         }
-        return f;
+        return;
     }
     let side = params.camera_side as usize;
     let camera = Camera::looking_at(&mesh.bounds(), side);
@@ -161,13 +174,27 @@ fn sample_with(
     for j in 0..side {
         for i in 0..side {
             let primary = camera.ray(i, j, &mut rng);
-            let hit = run(&primary, &mut f);
+            let hit = trace(&primary);
             if let Some(b) = bounce(mesh, &primary, &hit, offset, &mut rng) {
-                run(&b, &mut f);
+                trace(&b);
             }
         }
     }
-    f
+}
+
+/// The nanoseconds `clock` says the same sample rays as [`sample_grid`] take as plain queries
+/// through `query` (the grid or the kd-tree: their hits, and so the bounces, are the same), for
+/// the check after a kd-tree build to compare the two structures by time. Nothing is allocated.
+pub fn time_samples(
+    query: &dyn RayQuery,
+    mesh: &TriMesh,
+    rays: Option<&dyn RaySource>,
+    params: &SampleParams,
+    clock: &Clock,
+) -> u64 {
+    clock
+        .time(|| for_each_sample(mesh, rays, params, |ray| query.intersect(mesh, ray)))
+        .0
 }
 
 #[cfg(test)]
