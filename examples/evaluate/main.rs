@@ -667,13 +667,37 @@ fn check_section(md: &mut String, results: &[Measured]) {
         .position(|&s| s == default_side)
         .unwrap_or(SAMPLE_SIDES.len() - 1);
     let calibration = rayq::Calibration::builtin();
-    // What a wrong verdict costs on scene `m`: the slower structure's extra time per ray.
-    let loss = |m: &Measured, prices: &CheckPrices| {
-        let keeps_kd =
-            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, prices);
+    // What a verdict costs on scene `m`: the kept structure's time per ray over the faster one's,
+    // less one (0 when it keeps the faster).
+    let kept_loss = |m: &Measured, keeps_kd: bool| {
         let (g, kd) = (m.obs.grid_ray_ns, m.obs.kd_ray_ns);
         let kept = if keeps_kd { kd } else { g };
         kept / g.min(kd) - 1.0
+    };
+    let loss = |m: &Measured, prices: &CheckPrices| {
+        let keeps_kd =
+            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, prices);
+        kept_loss(m, keeps_kd)
+    };
+    // A row of the table: how often `keeps_kd` keeps the faster, the summed loss, the worst.
+    let row = |md: &mut String, label: &str, keeps_kd: &dyn Fn(&Measured) -> bool| {
+        let losses: Vec<(f64, &str)> = results
+            .iter()
+            .map(|m| (kept_loss(m, keeps_kd(m)), m.name.as_str()))
+            .collect();
+        let worst = losses
+            .iter()
+            .copied()
+            .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
+        let _ = writeln!(
+            md,
+            "| {label} | {} of {} | {:.3} | {} {:.1} % |",
+            losses.iter().filter(|l| l.0 == 0.0).count(),
+            results.len(),
+            losses.iter().map(|l| l.0).sum::<f64>(),
+            worst.1,
+            100.0 * worst.0
+        );
     };
     let observation = |m: &Measured| CheckObservation {
         grid: m.samples[k].0,
@@ -723,26 +747,13 @@ fn check_section(md: &mut String, results: &[Measured]) {
             let _ = writeln!(md, "| {label}: no fit | | | |");
             continue;
         };
-        let losses: Vec<(f64, &str)> = results
-            .iter()
-            .map(|m| (loss(m, &p), m.name.as_str()))
-            .collect();
-        let worst = losses
-            .iter()
-            .copied()
-            .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
-        let _ = writeln!(
-            md,
-            "| {label}: {:.2}, {:.2}, {:.2} | {} of {} | {:.3} | {} {:.1} % |",
-            p.fixed_per_grid_fixed,
-            p.node_per_cell_step,
-            p.test_per_grid_test,
-            losses.iter().filter(|l| l.0 == 0.0).count(),
-            results.len(),
-            losses.iter().map(|l| l.0).sum::<f64>(),
-            worst.1,
-            100.0 * worst.0
+        let label = format!(
+            "{label}: {:.2}, {:.2}, {:.2}",
+            p.fixed_per_grid_fixed, p.node_per_cell_step, p.test_per_grid_test
         );
+        row(md, &label, &|m| {
+            kd_tree_confirmed_at(calibration, &m.samples[k].0, &m.kd_samples[k].0, &p)
+        });
     }
     let loo: Vec<f64> = (0..results.len())
         .filter_map(|i| fitted(Some(i)).map(|p| loss(&results[i], &p)))
@@ -754,31 +765,14 @@ fn check_section(md: &mut String, results: &[Measured]) {
         loo.len(),
         loo.iter().sum::<f64>()
     );
-    // The timed check (the library's with a clock): both structures' time on the same samples.
-    let timed_loss: Vec<(f64, &str)> = results
-        .iter()
-        .map(|m| {
-            let (g_ns, k_ns) = m.timed_samples[k];
-            let keeps_kd = kd_tree_confirmed_timed(&m.samples[k].0, g_ns as u64, k_ns as u64);
-            let (g, kd) = (m.obs.grid_ray_ns, m.obs.kd_ray_ns);
-            (
-                (if keeps_kd { kd } else { g }) / g.min(kd) - 1.0,
-                m.name.as_str(),
-            )
-        })
-        .collect();
-    let worst = timed_loss
-        .iter()
-        .copied()
-        .fold((0.0, ""), |a, b| if b.0 > a.0 { b } else { a });
-    let _ = writeln!(
+    // The timed check (the library's for the caller's rays): both structures' time on the samples.
+    row(
         md,
-        "| timed by the clock (what the library does for the caller's rays, not its own) | {} of {} | {:.3} | {} {:.1} % |",
-        timed_loss.iter().filter(|l| l.0 == 0.0).count(),
-        results.len(),
-        timed_loss.iter().map(|l| l.0).sum::<f64>(),
-        worst.1,
-        100.0 * worst.0
+        "timed by the clock (what the library does for the caller's rays, not its own)",
+        &|m| {
+            let (grid_ns, kd_ns) = m.timed_samples[k];
+            kd_tree_confirmed_timed(&m.samples[k].0, grid_ns as u64, kd_ns as u64)
+        },
     );
     // A renderer that passes its own bounces as samples (the README's advice for bounce-heavy
     // work): every 16th of the workload's bounces, judged against the bounces' measured times.
