@@ -220,12 +220,15 @@ struct Measured {
     bounce_check: Option<BounceCheck>,
 }
 
-/// The check after a kd-tree build on bounce samples: both structures' counts and times.
+/// The check after a kd-tree build on bounce samples: both structures' counts, their plain passes'
+/// times and their counted passes' (the sampling's and the priced check's cost), ns.
 struct BounceCheck {
     grid: SceneFeatures,
     kd: SceneFeatures,
     grid_ns: f64,
     kd_ns: f64,
+    grid_counted_ns: f64,
+    kd_counted_ns: f64,
 }
 
 /// The accuracy check: its rays, their exact answers, and whether the mesh is closed.
@@ -308,15 +311,17 @@ fn measure_scene(spec: &SceneSpec, params: &MeasureParams, quick: bool) -> Optio
     let bounce_check = (!bounce_samples.is_empty()).then(|| {
         let src: Option<&dyn RaySource> = Some(&bounce_samples);
         let p = SampleParams::DEFAULT;
-        let g = sample_grid(&grid, &mesh, src, &p);
+        let (grid_counted, g) = clock.time(|| sample_grid(&grid, &mesh, src, &p));
         let grid_ns = time_samples(&grid, &mesh, src, &p, &clock);
-        let k = sample_kdtree(&tree, &mesh, src, &p);
+        let (kd_counted, k) = clock.time(|| sample_kdtree(&tree, &mesh, src, &p));
         let kd_ns = time_samples(&tree, &mesh, src, &p, &clock);
         BounceCheck {
             grid: g,
             kd: k,
             grid_ns: grid_ns as f64,
             kd_ns: kd_ns as f64,
+            grid_counted_ns: grid_counted as f64,
+            kd_counted_ns: kd_counted as f64,
         }
     });
     let limit = kd_tree_work_limit(mesh.len() - mesh.degenerate_count());
@@ -818,6 +823,61 @@ fn check_section(md: &mut String, results: &[Measured]) {
         right[1],
         judged.len(),
         lost[1]
+    );
+    // AUTO for such a renderer on a workload of bounces: its estimate from the bounce samples (the
+    // built-in calibration), its check priced or timed, totals against the bounces' measured times.
+    let mut regret: [(Vec<f64>, (f64, String)); 2] = Default::default();
+    for m in results {
+        let (Some(b), Some((kd, grid))) = (&m.bounce_check, m.by_kind[1]) else {
+            continue;
+        };
+        let o = Observation {
+            grid_ray_ns: grid,
+            kd_ray_ns: kd,
+            ..m.obs
+        };
+        for (j, (confirmed, check_ns)) in [
+            (
+                kd_tree_confirmed(calibration, &b.grid, &b.kd),
+                b.kd_counted_ns,
+            ),
+            (
+                kd_tree_confirmed_timed(&b.grid, b.grid_ns as u64, b.kd_ns as u64),
+                b.grid_ns + b.kd_ns,
+            ),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let sel = Selector {
+                estimate: calibration.estimate(&b.grid),
+                sample_s: b.grid_counted_ns * 1e-9,
+                confirmed,
+                check_s: check_ns * 1e-9,
+                abandoned_s: m.abandoned_s,
+            };
+            for r in budgets() {
+                let t = totals(&o, &sel, &sel, r, TRIAL_SHARE);
+                let x = t.auto_known / t.oracle;
+                regret[j].0.push(x);
+                if x > regret[j].1 .0 {
+                    regret[j].1 = (x, format!("{} at {r:.0e}", m.name));
+                }
+            }
+        }
+    }
+    let _ = writeln!(
+        md,
+        "\nAUTO for that renderer on a workload of bounces (known budgets 10³..10⁸, the estimate \
+         from the bounce samples with the built-in calibration, totals against the bounces' measured \
+         times): regret geometric mean {:.3} and worst {:.3} ({}) with the check priced, {:.3} and \
+         {:.3} ({}) timed.",
+        geomean(&regret[0].0),
+        regret[0].1 .0,
+        regret[0].1 .1,
+        geomean(&regret[1].0),
+        regret[1].1 .0,
+        regret[1].1 .1
     );
 }
 

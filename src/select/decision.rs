@@ -229,7 +229,7 @@ pub fn kd_tree_confirmed(
 /// confirm nothing to the contrary. Time sees what counted work does not: a node or a test costs
 /// more on rays that start on a surface in a random direction than on a camera's (with a sixteenth
 /// of the evaluation's bounces as samples, the counts priced as [`kd_tree_confirmed`] prices them
-/// keep the faster structure on 9 of 31 scenes, the clock on 27–28; docs/design.md, "The check
+/// keep the faster structure on 9 of 31 scenes, the clock on 27–30; docs/design.md, "The check
 /// after the kd-tree is built").
 pub fn kd_tree_confirmed_timed(grid: &SceneFeatures, grid_ns: u64, kd_ns: u64) -> bool {
     grid.rays == 0 || kd_ns < grid_ns || grid.has_heavy_cell()
