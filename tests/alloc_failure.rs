@@ -10,6 +10,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use rayq::select::clock::Clock;
+use rayq::select::sample::RaySource;
 use rayq::{procedural, BuildError, BuildOptions, Calibration, Scene, Structure};
 
 /// Passes every request to the system allocator, except that on a thread where it is armed it
@@ -116,8 +117,9 @@ fn armed<T>(
     (text, REFUSED.with(Cell::get), COUNT.with(Cell::get), live)
 }
 
-/// The options of a build under test. The clock, when there is one, is stopped (it always reads
-/// the same), so that the timed check's verdict, and with it the allocations, repeat exactly.
+/// The options of a build under test. The clock, when there is one, advances by the same step at
+/// every reading, so that the timed check's verdict (a tie, which drops the kd-tree), and with it
+/// the allocations, repeat exactly.
 fn options(
     structure: Structure,
     expected_rays: u64,
@@ -128,21 +130,30 @@ fn options(
         structure,
         expected_rays,
         memory_limit,
-        clock: timed.then_some(STOPPED_CLOCK),
+        clock: timed.then_some(STEADY_CLOCK),
         ..BuildOptions::DEFAULT
     }
 }
 
-extern "C" fn stopped(_user: *mut core::ffi::c_void) -> u64 {
-    7
+extern "C" fn steady(_user: *mut core::ffi::c_void) -> u64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    static NOW: AtomicU64 = AtomicU64::new(0);
+    NOW.fetch_add(1000, Ordering::Relaxed) + 1000
 }
 
-// SAFETY: `stopped` ignores its pointer, is callable from any thread and cannot unwind.
-const STOPPED_CLOCK: Clock = unsafe { Clock::new(stopped, core::ptr::null_mut()) };
+// SAFETY: `steady` ignores its pointer, is callable from any thread and cannot unwind.
+const STEADY_CLOCK: Clock = unsafe { Clock::new(steady, core::ptr::null_mut()) };
+
+/// Estimates that always build the kd-tree (the grid 1 µs a ray, the kd-tree 0.1 µs, its build
+/// 10 ns per N log2 N), for the timed check's build: the built-in calibration may not build one.
+fn favouring_the_kd_tree() -> Calibration {
+    Calibration::new(0, [10.0, 1000.0, 10.0, 1.0, 10.0, 0.0, 100.0, 0.0, 0.0]).unwrap()
+}
 
 /// The builds under test: every structure choice, and Auto both ways (a large known budget makes
-/// it build the grid, sample, build the kd-tree and check it: by counted work, or timed by a
-/// stopped clock, whose tie drops the kd-tree and builds the grid again).
+/// it build the grid, sample, build the kd-tree and check it: by counted work on its own samples,
+/// or, `true`, timed on the caller's samples by a steady clock, whose tie drops the kd-tree and
+/// builds the grid again).
 const BUILDS: [(&str, Structure, u64, bool); 5] = [
     ("grid", Structure::Grid, 0, false),
     ("kd-tree", Structure::KdTree, 0, false),
@@ -161,12 +172,25 @@ fn every_refused_allocation_is_out_of_memory_and_leaks_nothing() {
     // Small but with every path: a closed sphere (kd splits, grid cells) plus slivers.
     let mut data = procedural::closed_sphere(4);
     data.append(&procedural::random_slivers(40, 3));
-    let calibration = Calibration::builtin();
+    let samples = common::test_rays(&common::mesh_of(&data), 8, 0, 4);
+    let favouring = favouring_the_kd_tree();
     for (label, structure, rays, timed) in BUILDS {
         let opts = options(structure, rays, 0, timed);
-        let build = || Scene::build(&data.as_source(), &opts, calibration);
+        let given: Option<&dyn RaySource> = timed.then_some(&samples);
+        let calibration = if timed {
+            &favouring
+        } else {
+            Calibration::builtin()
+        };
+        let build = || Scene::build_with_samples(&data.as_source(), &opts, calibration, given);
         let (ok, _, total, live) = armed(None, build, |r| format!("{:?}", r.is_ok()));
         assert_eq!(ok, "true", "{label}: the unarmed build must succeed");
+        if timed {
+            // The path under test: a kd-tree built, timed, and dropped for the grid again.
+            let r = build().unwrap().report();
+            assert_eq!(r.outcome, rayq::scene::Outcome::GridFasterPerRay, "{label}");
+            assert!(r.break_even_rays < rays as f64, "{label}: {r:?}");
+        }
         assert_eq!(
             live, 0,
             "{label}: a built and dropped scene left {live} bytes alive"
@@ -194,15 +218,23 @@ fn every_refused_allocation_is_out_of_memory_and_leaks_nothing() {
 #[test]
 fn memory_limit_sweep_fits_or_refuses() {
     let data = procedural::by_name("stadium", 2000).unwrap();
-    let calibration = Calibration::builtin();
+    let samples = common::test_rays(&common::mesh_of(&data), 8, 0, 4);
+    let favouring = favouring_the_kd_tree();
     for (label, structure, rays, timed) in BUILDS {
+        let given: Option<&dyn RaySource> = timed.then_some(&samples);
+        let calibration = if timed {
+            &favouring
+        } else {
+            Calibration::builtin()
+        };
         let mut limit = 1usize;
         let mut fitted = false;
         while limit < 64 << 20 {
-            match Scene::build(
+            match Scene::build_with_samples(
                 &data.as_source(),
                 &options(structure, rays, limit, timed),
                 calibration,
+                given,
             ) {
                 Ok(scene) => {
                     let bytes = scene.report().memory_bytes;

@@ -777,6 +777,27 @@ fn a_timed_check_keeps_the_kd_tree_only_if_the_clock_says_it_is_faster() {
     // The library's samples: priced, whatever the clock would say.
     assert_eq!(outcome(&tetra, &fast_kd, true, true), kept);
     assert_eq!(outcome(&soup, &cheap, false, true), dropped);
+    // A clock that does not move over the passes says nothing: the counted work decides, as
+    // without a clock.
+    extern "C" fn frozen(_user: *mut core::ffi::c_void) -> u64 {
+        5
+    }
+    for (data, c) in [(&tetra, &fast_kd), (&soup, &cheap)] {
+        let samples = test_rays(&mesh_of(data), 24, 0, 8);
+        let with = |clock| {
+            let options = BuildOptions {
+                clock,
+                ..auto(u64::MAX / 4)
+            };
+            let r = Scene::build_with_samples(&data.as_source(), &options, c, Some(&samples))
+                .unwrap()
+                .report();
+            (r.structure, r.outcome)
+        };
+        // SAFETY: `frozen` ignores its pointer and cannot unwind.
+        let clock = unsafe { rayq::select::clock::Clock::new(frozen, core::ptr::null_mut()) };
+        assert_eq!(with(Some(clock)), with(None));
+    }
 }
 
 /// The online switch's check is timed on the tapped queries: once two batches of them ask for the

@@ -195,7 +195,8 @@ pub struct rq_build_options {
     /// counted work instead, by prices fitted to them. `rq_build_options_init` sets the library's
     /// own clock (this thread's CPU time) where it has one; NULL prices every check, which is
     /// deterministic but blind to what your rays cost beyond their counts (on diffuse bounces the
-    /// prices keep a slower kd-tree on most scenes). Called on the thread that builds or updates
+    /// prices keep a slower kd-tree on most scenes); a clock that does not move over a pass of
+    /// them is as good as none. Called on the thread that builds or updates
     /// the scene; must not call rayq. Kept by the scene for `rq_scene_update`, so it and
     /// `clock_user` must stay valid as long as the scene.
     pub clock: rq_clock_fn,

@@ -136,7 +136,8 @@ pub(super) fn choose(
 /// The check after a kd-tree build, on the sample rays `rays` (or the library's per `params`) that
 /// gave `grid` on the grid: with `timed` (the scene's clock and the grid's time on those rays by
 /// it), the kd-tree is kept only if they take it less time ([`kd_tree_confirmed_timed`]); without,
-/// only if their counted work on it, priced, is below the grid's ([`kd_tree_confirmed`]).
+/// or when the clock did not move over either pass (one too coarse for them says nothing), only if
+/// their counted work on it, priced, is below the grid's ([`kd_tree_confirmed`]).
 pub(super) fn keeps_kd_tree(
     tree: &KdTree,
     mesh: &TriMesh,
@@ -148,7 +149,9 @@ pub(super) fn keeps_kd_tree(
 ) -> bool {
     if let Some((clock, grid_ns)) = timed {
         let kd_ns = time_samples(tree, mesh, rays, params, clock);
-        return kd_tree_confirmed_timed(grid, grid_ns, kd_ns);
+        if grid_ns > 0 && kd_ns > 0 {
+            return kd_tree_confirmed_timed(grid, grid_ns, kd_ns);
+        }
     }
     let kd = sample_kdtree(tree, mesh, rays, params);
     // The same rays on both structures, whose answers are the same.
