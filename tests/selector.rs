@@ -52,6 +52,11 @@ unsafe extern "C" fn scripted_reading(user: *mut core::ffi::c_void) -> u64 {
     }
 }
 
+/// A clock that never moves.
+extern "C" fn frozen(_user: *mut core::ffi::c_void) -> u64 {
+    5
+}
+
 /// What [`scripted_reading`] reads: how many readings so far, and which way it leans.
 struct Script {
     readings: std::sync::atomic::AtomicU64,
@@ -779,9 +784,6 @@ fn a_timed_check_keeps_the_kd_tree_only_if_the_clock_says_it_is_faster() {
     assert_eq!(outcome(&soup, &cheap, false, true), dropped);
     // A clock that does not move over the passes says nothing: the counted work decides, as
     // without a clock.
-    extern "C" fn frozen(_user: *mut core::ffi::c_void) -> u64 {
-        5
-    }
     for (data, c) in [(&tetra, &fast_kd), (&soup, &cheap)] {
         let samples = test_rays(&mesh_of(data), 24, 0, 8);
         let with = |clock| {
@@ -838,4 +840,77 @@ fn the_online_switch_keeps_a_kd_tree_the_clock_finds_slower_out() {
         drop(scene);
         assert_eq!(script.readings.into_inner(), 4);
     }
+}
+
+/// A kd-tree kept on the library's own samples (priced) is checked once more on the renderer's
+/// rays when the scene has a clock: the first update with 256 tapped queries times them on the
+/// kd-tree, builds a grid and times them on it, and keeps whichever took less — the grid when the
+/// clock says so (reported as faster per ray), the kd-tree otherwise; never again after. Without a
+/// clock nothing is tapped on a kd-tree.
+#[test]
+fn a_kd_tree_kept_on_the_library_samples_is_checked_again_on_the_tapped_queries() {
+    let data = kd_friendly();
+    let c = calibration(100.0, 10_000.0);
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 140, 0, 10);
+    for slower_later in [true, false] {
+        let script = Script {
+            readings: std::sync::atomic::AtomicU64::new(0),
+            slower_later,
+        };
+        let mut scene =
+            Scene::build(&data.as_source(), &scripted(u64::MAX / 4, &script), &c).unwrap();
+        let r = scene.report();
+        assert_eq!(
+            (r.structure, r.outcome),
+            (Structure::KdTree, Outcome::AboveBreakEven)
+        );
+        // Too few tapped yet: nothing is timed.
+        for ray in &rays[..1000] {
+            scene.intersect(ray);
+        }
+        scene.update(1000, 0).unwrap();
+        assert_eq!(
+            script.readings.load(std::sync::atomic::Ordering::Relaxed),
+            0
+        );
+        let hits: Vec<_> = rays.iter().map(|ray| scene.intersect(ray)).collect();
+        scene.update(rays.len() as u64, 0).unwrap();
+        let r = scene.report();
+        // The kd-tree's pass is timed first: a clock slower later makes the grid's the longer.
+        let want = if slower_later {
+            (Structure::KdTree, Outcome::AboveBreakEven)
+        } else {
+            (Structure::Grid, Outcome::GridFasterPerRay)
+        };
+        assert_eq!((r.structure, r.outcome), want);
+        for (ray, h) in rays.iter().zip(&hits) {
+            assert!(scene.intersect(ray).same_bits(h));
+        }
+        for ray in &rays {
+            scene.intersect(ray);
+        }
+        scene.update(rays.len() as u64, 0).unwrap();
+        assert_eq!(scene.report().structure, want.0);
+        drop(scene);
+        assert_eq!(script.readings.into_inner(), 4);
+    }
+    // Without a clock the kd-tree is final: no tap (its bytes are not held).
+    let scene = Scene::build(&data.as_source(), &auto(u64::MAX / 4), &c).unwrap();
+    let r = scene.report();
+    assert_eq!(r.structure, Structure::KdTree);
+    let timed = Scene::build(
+        &data.as_source(),
+        &BuildOptions {
+            // SAFETY: `frozen` ignores its pointer and cannot unwind.
+            clock: Some(unsafe { rayq::select::clock::Clock::new(frozen, core::ptr::null_mut()) }),
+            ..auto(u64::MAX / 4)
+        },
+        &c,
+    )
+    .unwrap();
+    assert_eq!(
+        timed.report().memory_bytes,
+        r.memory_bytes + rayq::scene::TAP_RAYS * std::mem::size_of::<rayq::Ray>()
+    );
 }

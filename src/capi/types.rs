@@ -94,7 +94,8 @@ pub enum rq_kd_quality {
 pub enum rq_outcome {
     /// The caller chose the structure (or only one was available).
     RQ_OUTCOME_FORCED = 0,
-    /// `t_grid <= t_kd`: the kd-tree never pays.
+    /// `t_grid <= t_kd`: the kd-tree never pays (estimated, or measured on the tapped queries by
+    /// `rq_scene_update` after a kd-tree built on the library's samples).
     RQ_OUTCOME_GRID_FASTER_PER_RAY = 1,
     /// Expected rays < W*: kept the grid.
     RQ_OUTCOME_BELOW_BREAK_EVEN = 2,

@@ -12,7 +12,8 @@ use crate::mesh::{MeshSource, TriMesh};
 use crate::ray::{Hit, Ray};
 use crate::select::calibration::Calibration;
 use crate::select::clock::Clock;
-use crate::select::decision::{kd_tree_work_limit, CostEstimate, OnlineSwitch};
+use crate::select::decision::{kd_tree_work_limit, CostEstimate, OnlineSwitch, TRIAL_SHARE};
+use crate::select::model::Part;
 use crate::select::model::SceneFeatures;
 use crate::select::sample::{sample_grid, time_samples, RaySource, SampleParams};
 
@@ -39,7 +40,9 @@ pub enum Structure {
 pub enum Outcome {
     /// The caller chose the structure.
     Forced,
-    /// The grid is at least as fast per ray: the kd-tree never pays.
+    /// The grid is at least as fast per ray: the kd-tree never pays (estimated; or measured, when a
+    /// kd-tree built on the library's samples took the renderer's tapped queries longer than a
+    /// grid built again: [`Scene::update`]).
     GridFasterPerRay,
     /// Fewer rays expected than the break-even workload: the grid was kept.
     BelowBreakEven,
@@ -389,6 +392,70 @@ impl Scene {
         Ok(scene)
     }
 
+    /// Whether the scene holds a kd-tree that `Auto` kept on the library's own samples, priced, and
+    /// has a clock to time the renderer's tapped queries on it and on a grid built again
+    /// ([`Scene::update`]).
+    fn rechecks_kd_tree(&self) -> bool {
+        matches!(self.accel, Accel::KdTree(_))
+            && self.report.outcome == Outcome::AboveBreakEven
+            && self.grid_samples.is_some()
+            && self.options.clock.is_some()
+    }
+
+    /// [`Scene::update`] on a kd-tree [`Scene::rechecks_kd_tree`] says to check again: once the
+    /// tap holds [`TAP_MIN_RAYS`], and when a grid's build could be repaid by the rays that may
+    /// remain (it costs at most [`TRIAL_SHARE`] of their time on the grid, by the estimate; an
+    /// unknown remainder always may), the tapped rays are timed on the kd-tree, a grid is built
+    /// and they are timed on it too; the grid replaces the kd-tree if they took it less time and it
+    /// has no heavy cell ([`SceneFeatures::has_heavy_cell`]). Once only: the tap goes either way.
+    fn recheck_kd_tree(&mut self, rays_remaining: u64) -> Result<(), BuildError> {
+        let Some(clock) = self.options.clock else {
+            return Ok(());
+        };
+        if self.tap.as_mut().map_or(0, QueryTap::taken) < TAP_MIN_RAYS {
+            return Ok(());
+        }
+        let live = SceneFeatures {
+            triangles: self.mesh.len() - self.mesh.degenerate_count(),
+            ..SceneFeatures::default()
+        };
+        let grid_build = Part::GridBuild.predict(&self.calibration, &live) * 1e-9;
+        let remaining_on_grid = rays_remaining as f64 * self.report.grid_ray_seconds;
+        if rays_remaining != 0 && !(grid_build <= TRIAL_SHARE * remaining_on_grid) {
+            self.tap = None;
+            return Ok(());
+        }
+        let params = self.options.samples;
+        let kd_ns = match (self.tap.as_mut(), &self.accel) {
+            (Some(tap), Accel::KdTree(tree)) => {
+                time_samples(tree, &self.mesh, Some(&tap.rays()), &params, &clock)
+            }
+            _ => return Ok(()),
+        };
+        // Both held while the grid is built: the memory limit must hold them. A refusal ends the
+        // re-check (it would only be refused again) and is the call's error; the kd-tree stays.
+        let mut budget = self.options.budget();
+        let built = budget
+            .charge(self.memory_bytes(), "the scene's mesh and kd-tree")
+            .and_then(|()| UniformGrid::build(&self.mesh, &self.options.grid, &mut budget));
+        let (grid, Some(mut tap)) = (built, self.tap.take()) else {
+            return Ok(());
+        };
+        let grid = grid?;
+        let features = sample_grid(&grid, &self.mesh, Some(&tap.rays()), &params);
+        let grid_ns = time_samples(&grid, &self.mesh, Some(&tap.rays()), &params, &clock);
+        if grid_ns > 0 && grid_ns < kd_ns && !features.has_heavy_cell() {
+            let tree = core::mem::replace(&mut self.accel, Accel::Grid(grid));
+            tree.release(&mut budget);
+            self.report.outcome = Outcome::GridFasterPerRay;
+            self.take_estimate(Some(&self.calibration.estimate(&features)));
+        } else {
+            grid.release(&mut budget);
+        }
+        self.refresh_report();
+        Ok(())
+    }
+
     /// Records what a selection found (everything of a [`Choice`] but its structure).
     fn take_choice_facts(
         &mut self,
@@ -414,13 +481,14 @@ impl Scene {
         ] = estimate_fields(estimate);
     }
 
-    /// A tap while `Auto` holds the grid over some triangles (emptied if there was one), none
+    /// A tap while `Auto` holds the grid over some triangles, or a kd-tree it will check again on
+    /// the renderer's rays ([`Scene::rechecks_kd_tree`]) (emptied if there was one), none
     /// otherwise. The tap's buffer is charged to `budget`: one the memory limit has no room for is
     /// simply not taken (it only improves a later decision); a refusal by the monitor or the
     /// allocator is the build's error, as for any other allocation.
     fn refresh_tap(&mut self, budget: &mut MemoryBudget) -> Result<(), BuildError> {
         let wanted = self.options.structure == Structure::Auto
-            && matches!(self.accel, Accel::Grid(_))
+            && (matches!(self.accel, Accel::Grid(_)) || self.rechecks_kd_tree())
             && self.report.outcome != Outcome::Forced
             && self.mesh.len() > self.mesh.degenerate_count();
         match (&mut self.tap, wanted) {
@@ -542,12 +610,23 @@ impl Scene {
     ///
     /// The kd-tree is built while the grid is still held (the memory limit must hold both); if
     /// that fails the scene stays on the grid, unchanged, and the error is returned.
+    ///
+    /// A kd-tree `Auto` built on its own samples (priced: they may not look like the renderer's
+    /// rays) is checked once more when the scene has a clock: the scene taps its queries on the
+    /// kd-tree too, and the first call that finds 256 of them (with rays that may remain enough to
+    /// repay a grid's build: [`crate::select::decision::TRIAL_SHARE`] of their time on it, or an
+    /// unknown remainder) times them on the kd-tree, builds a grid (both held: the memory limit
+    /// must hold them; a refusal is the call's error and ends the re-check), times them on it, and
+    /// keeps whichever took less (outcome [`Outcome::GridFasterPerRay`] for the grid). Once only.
     pub fn update(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
         if rays_remaining == RAYS_REMAINING_NONE {
             self.online = None;
             self.tap = None;
             return Ok(());
+        }
+        if matches!(self.accel, Accel::KdTree(_)) {
+            return self.recheck_kd_tree(rays_remaining);
         }
         let tapped = self.estimate_from_tap();
         let switch = match self.online.as_mut() {
