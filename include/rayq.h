@@ -372,13 +372,16 @@ typedef struct rq_build_options {
   // The clock by which AUTO's check after a kd-tree build times your rays on both structures
   // (nanoseconds that never go back; only differences on one thread are used): `sample_rays`,
   // and the queries `rq_scene_update` tapped. The library's own sample rays are priced from their
-  // counted work instead, by prices fitted to them. `rq_build_options_init` sets the library's
-  // own clock (this thread's CPU time) where it has one; NULL prices every check, which is
+  // counted work instead, by prices fitted to them; but a kd-tree chosen on them is timed once
+  // more against a grid on your tapped queries by `rq_scene_update` (see there).
+  // `rq_build_options_init` sets the library's own clock (this thread's CPU time on Linux,
+  // monotonic wall time elsewhere) where it has one; NULL prices every check, which is
   // deterministic but blind to what your rays cost beyond their counts (on diffuse bounces the
-  // prices keep a slower kd-tree on most scenes); a clock that does not move over a pass of
-  // them is as good as none. Called on the thread that builds or updates
-  // the scene; must not call rayq. Kept by the scene for `rq_scene_update`, so it and
-  // `clock_user` must stay valid as long as the scene.
+  // prices keep a slower kd-tree on most scenes), and so does a `struct_size` that stops before
+  // this field; a clock that does not move over a pass of them is as good as none. Called on the
+  // thread that builds or updates the scene (scenes on different threads may call one clock at
+  // once); must not call rayq. Kept by the scene for `rq_scene_update`, so it and `clock_user`
+  // must stay valid as long as the scene.
   rq_clock_fn clock;
   // Passed to `clock`.
   void *clock_user;
@@ -733,16 +736,23 @@ rq_status rq_scene_report_get(const struct rq_scene *scene, struct rq_scene_repo
 // batch starts the tap over, and the switch comes at the first call whose batch (256 tapped rays
 // or more, about 16 000 queries) asks for it after one that asked too; a batch that does not ask
 // cancels it. Meanwhile the report may show a W* below `rays_remaining` with the grid held. The
-// kd-tree is kept only if it saves work on the last batch's tapped rays. The kd-tree is built while the grid is still
-// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
-// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
-// unchanged and usable.
+// kd-tree is kept only if the last batch's tapped rays took it less time than the grid (with a
+// `clock`; without one, only if their counted work on it, priced, is the smaller). The kd-tree is
+// built while the grid is still held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT),
+// memory runs out, or the build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the
+// scene stays on the grid, unchanged and usable.
+//
+// With a `clock`, a kd-tree AUTO built at `rq_scene_build` on the library's own samples is checked
+// once more: the scene taps its queries on the kd-tree too, and the first call that finds 256 of
+// them (with `rays_remaining` 0, or enough rays left that a grid's build costs at most a sixteenth
+// of their estimated time on it) times them on the kd-tree, builds a grid, times them on it, and
+// keeps the faster (RQ_OUTCOME_GRID_FASTER_PER_RAY for the grid). Both are held meanwhile: if the
+// grid does not fit `memory_limit`, memory runs out or the monitor refuses, the call returns that
+// status, the scene keeps its kd-tree, unchanged and usable, and the re-check is not tried again.
 //
 // # Safety
 // `scene` is NULL or a live handle not being queried by another thread.
-rq_status rq_scene_update(struct rq_scene *scene,
-                          uint64_t rays_traced,
-                          uint64_t rays_remaining);
+rq_status rq_scene_update(struct rq_scene *scene, uint64_t rays_traced, uint64_t rays_remaining);
 
 #ifdef __cplusplus
 }  // extern "C"

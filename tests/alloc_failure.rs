@@ -136,12 +136,18 @@ fn options(
 }
 
 extern "C" fn steady(_user: *mut core::ffi::c_void) -> u64 {
-    use std::sync::atomic::{AtomicU64, Ordering};
-    static NOW: AtomicU64 = AtomicU64::new(0);
-    NOW.fetch_add(1000, Ordering::Relaxed) + 1000
+    // Per thread, so that tests running at once do not step each other's clock.
+    thread_local! {
+        static NOW: Cell<u64> = const { Cell::new(0) };
+    }
+    NOW.with(|n| {
+        n.set(n.get() + 1000);
+        n.get()
+    })
 }
 
-// SAFETY: `steady` ignores its pointer, is callable from any thread and cannot unwind.
+// SAFETY: `steady` ignores its pointer, is callable from any thread (each has its own count) and
+// cannot unwind.
 const STEADY_CLOCK: Clock = unsafe { Clock::new(steady, core::ptr::null_mut()) };
 
 /// Estimates that always build the kd-tree (the grid 1 µs a ray, the kd-tree 0.1 µs, its build

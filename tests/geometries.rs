@@ -378,8 +378,6 @@ fn moved_vertices_answer_as_a_fresh_build_of_the_moved_meshes() {
             "auto-many-rays",
             BuildOptions {
                 expected_rays: 1 << 40,
-                // The check priced from counted work, not timed: the two scenes then choose alike.
-                clock: None,
                 ..BuildOptions::DEFAULT
             },
         ),

@@ -44,21 +44,12 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
                 memory_monitor_user: ptr::null_mut(),
                 budget_kind: rq_budget_kind::RQ_BUDGET_EXPECTED,
                 kd_quality: rq_kd_quality::RQ_KD_QUALITY_DEFAULT,
-                clock: DEFAULT_CLOCK,
+                clock: crate::select::clock::DEFAULT_CALLBACK,
                 clock_user: ptr::null_mut(),
             })
         }
     })
 }
-
-/// The clock `rq_build_options_init` sets, and a caller's `struct_size` that stops short of `clock`
-/// gets: the library's ([`crate::select::clock::Clock::THREAD`]) in `std` builds, none without.
-#[cfg(feature = "std")]
-const DEFAULT_CLOCK: rq_clock_fn = Some(crate::select::clock::thread_clock);
-/// The clock `rq_build_options_init` sets, and a caller's `struct_size` that stops short of `clock`
-/// gets: the library's ([`crate::select::clock::Clock::THREAD`]) in `std` builds, none without.
-#[cfg(not(feature = "std"))]
-const DEFAULT_CLOCK: rq_clock_fn = None;
 
 /// Options as read from C, with the defaults for fields the caller's `struct_size` does not cover.
 struct Options {
@@ -169,7 +160,9 @@ unsafe fn read_options(
     // SAFETY: rq_scene_build's contract: the callback is callable with its user pointer for as long
     // as the scene lives, on the threads that build or update it.
     o.memory_monitor = monitor.map(|f| unsafe { MemoryMonitor::new(f, monitor_user) });
-    let clock = read_covered!(p, size, clock, rq_clock_fn, DEFAULT_CLOCK);
+    // A caller built against a header without `clock` gets none: the library behaves for it as it
+    // did (the check priced, deterministic; no re-check of a kd-tree in `rq_scene_update`).
+    let clock = read_covered!(p, size, clock, rq_clock_fn, None);
     let clock_user = read_covered!(p, size, clock_user, *mut core::ffi::c_void, ptr::null_mut());
     // SAFETY: rq_scene_build's contract: the clock is callable with its user pointer for as long as
     // the scene lives, on the threads that build or update it.
@@ -618,10 +611,19 @@ pub unsafe extern "C" fn rq_scene_report_get(
 /// batch starts the tap over, and the switch comes at the first call whose batch (256 tapped rays
 /// or more, about 16 000 queries) asks for it after one that asked too; a batch that does not ask
 /// cancels it. Meanwhile the report may show a W* below `rays_remaining` with the grid held. The
-/// kd-tree is kept only if it saves work on the last batch's tapped rays. The kd-tree is built while the grid is still
-/// held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT), memory runs out, or the
-/// build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the scene stays on the grid,
-/// unchanged and usable.
+/// kd-tree is kept only if the last batch's tapped rays took it less time than the grid (with a
+/// `clock`; without one, only if their counted work on it, priced, is the smaller). The kd-tree is
+/// built while the grid is still held; if it does not fit `memory_limit` (RQ_STATUS_MEMORY_LIMIT),
+/// memory runs out, or the build's `memory_monitor` refuses an allocation (RQ_STATUS_CANCELLED), the
+/// scene stays on the grid, unchanged and usable.
+///
+/// With a `clock`, a kd-tree AUTO built at `rq_scene_build` on the library's own samples is checked
+/// once more: the scene taps its queries on the kd-tree too, and the first call that finds 256 of
+/// them (with `rays_remaining` 0, or enough rays left that a grid's build costs at most a sixteenth
+/// of their estimated time on it) times them on the kd-tree, builds a grid, times them on it, and
+/// keeps the faster (RQ_OUTCOME_GRID_FASTER_PER_RAY for the grid). Both are held meanwhile: if the
+/// grid does not fit `memory_limit`, memory runs out or the monitor refuses, the call returns that
+/// status, the scene keeps its kd-tree, unchanged and usable, and the re-check is not tried again.
 ///
 /// # Safety
 /// `scene` is NULL or a live handle not being queried by another thread.

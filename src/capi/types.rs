@@ -193,13 +193,16 @@ pub struct rq_build_options {
     /// The clock by which AUTO's check after a kd-tree build times your rays on both structures
     /// (nanoseconds that never go back; only differences on one thread are used): `sample_rays`,
     /// and the queries `rq_scene_update` tapped. The library's own sample rays are priced from their
-    /// counted work instead, by prices fitted to them. `rq_build_options_init` sets the library's
-    /// own clock (this thread's CPU time) where it has one; NULL prices every check, which is
+    /// counted work instead, by prices fitted to them; but a kd-tree chosen on them is timed once
+    /// more against a grid on your tapped queries by `rq_scene_update` (see there).
+    /// `rq_build_options_init` sets the library's own clock (this thread's CPU time on Linux,
+    /// monotonic wall time elsewhere) where it has one; NULL prices every check, which is
     /// deterministic but blind to what your rays cost beyond their counts (on diffuse bounces the
-    /// prices keep a slower kd-tree on most scenes); a clock that does not move over a pass of
-    /// them is as good as none. Called on the thread that builds or updates
-    /// the scene; must not call rayq. Kept by the scene for `rq_scene_update`, so it and
-    /// `clock_user` must stay valid as long as the scene.
+    /// prices keep a slower kd-tree on most scenes), and so does a `struct_size` that stops before
+    /// this field; a clock that does not move over a pass of them is as good as none. Called on the
+    /// thread that builds or updates the scene (scenes on different threads may call one clock at
+    /// once); must not call rayq. Kept by the scene for `rq_scene_update`, so it and `clock_user`
+    /// must stay valid as long as the scene.
     pub clock: rq_clock_fn,
     /// Passed to `clock`.
     pub clock_user: *mut c_void,

@@ -34,7 +34,8 @@ pub(super) struct Choice {
 /// with a known `expected_rays`, keeps the grid or replaces it by the kd-tree (at W*, or as a trial
 /// where the build is cheap against the grid's time: see `Decision::Trial`; the grid is released
 /// first, so the memory limit must hold the mesh and the kd-tree) and keeps that kd-tree only if
-/// it saves work on the same samples; with an unknown budget, stays on the grid. What it built is
+/// it is faster on the same samples (see `keeps_kd_tree`); with an unknown budget, stays on the
+/// grid. What it built is
 /// released on failure; `mesh` is the caller's.
 pub(super) fn choose(
     mesh: &TriMesh,
@@ -135,9 +136,12 @@ pub(super) fn choose(
 
 /// The check after a kd-tree build, on the sample rays `rays` (or the library's per `params`) that
 /// gave `grid` on the grid: with `timed` (the scene's clock and the grid's time on those rays by
-/// it), the kd-tree is kept only if they take it less time ([`kd_tree_confirmed_timed`]); without,
-/// or when the clock did not move over either pass (one too coarse for them says nothing), only if
-/// their counted work on it, priced, is below the grid's ([`kd_tree_confirmed`]).
+/// it, taken right after a counted pass of them), the kd-tree is kept only if they take it less
+/// time ([`kd_tree_confirmed_timed`]), timed likewise right after a counted pass, so that neither
+/// structure is timed cold (a kd-tree's first pass after its build took 1.3–3× its second in a
+/// review's measurement); without, or when the clock did not move over a pass (one too coarse
+/// for them says nothing), only if their counted work on it, priced, is below the grid's
+/// ([`kd_tree_confirmed`]).
 pub(super) fn keeps_kd_tree(
     tree: &KdTree,
     mesh: &TriMesh,
@@ -147,14 +151,14 @@ pub(super) fn keeps_kd_tree(
     rays: Option<&dyn RaySource>,
     params: &SampleParams,
 ) -> bool {
-    if let Some((clock, grid_ns)) = timed {
-        let kd_ns = time_samples(tree, mesh, rays, params, clock);
-        if grid_ns > 0 && kd_ns > 0 {
-            return kd_tree_confirmed_timed(grid, grid_ns, kd_ns);
-        }
-    }
     let kd = sample_kdtree(tree, mesh, rays, params);
     // The same rays on both structures, whose answers are the same.
     debug_assert_eq!((kd.rays, kd.hits), (grid.rays, grid.hits));
+    if let Some((clock, grid_ns)) = timed.filter(|&(_, grid_ns)| grid_ns > 0) {
+        let kd_ns = time_samples(tree, mesh, rays, params, clock);
+        if kd_ns > 0 {
+            return kd_tree_confirmed_timed(grid, grid_ns, kd_ns);
+        }
+    }
     kd_tree_confirmed(calibration, grid, &kd)
 }

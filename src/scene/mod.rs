@@ -15,7 +15,7 @@ use crate::select::clock::Clock;
 use crate::select::decision::{kd_tree_work_limit, CostEstimate, OnlineSwitch, TRIAL_SHARE};
 use crate::select::model::Part;
 use crate::select::model::SceneFeatures;
-use crate::select::sample::{sample_grid, time_samples, RaySource, SampleParams};
+use crate::select::sample::{sample_grid, sample_kdtree, time_samples, RaySource, SampleParams};
 
 mod choose;
 mod tap;
@@ -99,8 +99,10 @@ pub struct BuildOptions {
     /// library's own samples are always priced from their counted work, by prices fitted to them
     /// ([`crate::select::decision::CheckPrices::LIBRARY`]); for other rays no prices are known to
     /// hold (on diffuse bounces they keep a slower kd-tree on most scenes), so they are timed.
-    /// `None` prices every check, deterministically. Default [`Clock::DEFAULT`]: this thread's CPU
-    /// time in `std` builds, none without.
+    /// `None` prices every check, deterministically. With a clock a kd-tree kept on the library's
+    /// samples is also checked once more on the tapped queries ([`Scene::update`]). Default
+    /// [`Clock::DEFAULT`]: this thread's CPU time on Linux (monotonic wall time elsewhere) in `std`
+    /// builds, none without.
     pub clock: Option<Clock>,
 }
 
@@ -426,8 +428,11 @@ impl Scene {
             return Ok(());
         }
         let params = self.options.samples;
+        // Each structure timed right after a counted pass of the same rays, as at the check
+        // after a build (`keeps_kd_tree`): neither is timed cold.
         let kd_ns = match (self.tap.as_mut(), &self.accel) {
             (Some(tap), Accel::KdTree(tree)) => {
+                sample_kdtree(tree, &self.mesh, Some(&tap.rays()), &params);
                 time_samples(tree, &self.mesh, Some(&tap.rays()), &params, &clock)
             }
             _ => return Ok(()),
@@ -606,7 +611,8 @@ impl Scene {
     /// waits for a batch's tapped rays to agree: each measured batch starts the tap over, and the
     /// switch comes at the first call whose batch's tapped rays (256 or more) ask for it after a
     /// batch that asked too; a batch that does not ask cancels it. A kd-tree built then is kept
-    /// only if it saves work on that batch's tapped rays.
+    /// only if that batch's tapped rays took it less time than the grid (with a clock; without,
+    /// only if their counted work on it, priced, is the smaller).
     ///
     /// The kd-tree is built while the grid is still held (the memory limit must hold both); if
     /// that fails the scene stays on the grid, unchanged, and the error is returned.

@@ -8,7 +8,8 @@ use core::ffi::c_void;
 /// it is given. Only differences of two readings on one thread are used, so its epoch is free.
 ///
 /// Guarantees: [`Clock::now_ns`] calls the function exactly once per reading, with the pointer
-/// given to [`Clock::new`], on the thread that builds or updates a scene.
+/// given to [`Clock::new`], on the calling thread (a scene reads it on the thread that builds or
+/// updates it).
 #[derive(Clone, Copy, Debug)]
 pub struct Clock {
     callback: unsafe extern "C" fn(user: *mut c_void) -> u64,
@@ -25,8 +26,9 @@ impl Clock {
     /// A clock that reads `callback(user)`.
     ///
     /// # Safety
-    /// `callback` must be safe to call with `user` from any thread that builds or updates a scene
-    /// holding this clock, for as long as such a scene exists, and must not unwind.
+    /// `callback` must be safe to call with `user` from any thread, possibly from several at once
+    /// (scenes built on different threads may share a clock), for as long as this clock or any
+    /// copy of it exists, and must not unwind.
     pub const unsafe fn new(
         callback: unsafe extern "C" fn(user: *mut c_void) -> u64,
         user: *mut c_void,
@@ -49,8 +51,8 @@ impl Clock {
         (self.now_ns().saturating_sub(start), r)
     }
 
-    /// The clock of `std` builds: this thread's CPU time where Linux offers it (so that time a
-    /// shared machine gives to other threads or guests does not count), else a monotonic clock.
+    /// The clock of `std` builds: this thread's CPU time on Linux (so that time a shared machine
+    /// gives to other threads or guests does not count), monotonic wall time elsewhere.
     #[cfg(feature = "std")]
     pub const THREAD: Clock = Clock {
         callback: thread_clock,
@@ -58,14 +60,25 @@ impl Clock {
     };
 
     /// The clock a scene uses unless told otherwise: [`Clock::THREAD`] in `std` builds, none
-    /// without `std` (the check then prices counted work).
-    #[cfg(feature = "std")]
-    pub const DEFAULT: Option<Clock> = Some(Clock::THREAD);
-    /// The clock a scene uses unless told otherwise: [`Clock::THREAD`] in `std` builds, none
-    /// without `std` (the check then prices counted work).
-    #[cfg(not(feature = "std"))]
-    pub const DEFAULT: Option<Clock> = None;
+    /// without `std` (the check then prices counted work). Made from [`DEFAULT_CALLBACK`].
+    pub const DEFAULT: Option<Clock> = match DEFAULT_CALLBACK {
+        Some(callback) => Some(Clock {
+            callback,
+            user: core::ptr::null_mut(),
+        }),
+        None => None,
+    };
 }
+
+/// The function of [`Clock::DEFAULT`] (its pointer is null): [`Clock::THREAD`]'s in `std` builds,
+/// none without; what the C API's `rq_build_options_init` sets.
+#[cfg(feature = "std")]
+pub const DEFAULT_CALLBACK: Option<unsafe extern "C" fn(user: *mut c_void) -> u64> =
+    Some(thread_clock);
+/// The function of [`Clock::DEFAULT`] (its pointer is null): [`Clock::THREAD`]'s in `std` builds,
+/// none without; what the C API's `rq_build_options_init` sets.
+#[cfg(not(feature = "std"))]
+pub const DEFAULT_CALLBACK: Option<unsafe extern "C" fn(user: *mut c_void) -> u64> = None;
 
 /// [`Clock::THREAD`]'s function (C-callable, so that the C API can hand it out as the default).
 #[cfg(feature = "std")]
@@ -86,22 +99,12 @@ pub fn thread_nanos() -> u64 {
 
 #[cfg(all(feature = "std", target_os = "linux"))]
 fn thread_cpu_nanos() -> Option<u64> {
-    use core::ffi::{c_int, c_long};
-    #[repr(C)]
-    struct Timespec {
-        tv_sec: c_long,
-        tv_nsec: c_long,
-    }
-    extern "C" {
-        fn clock_gettime(clock: c_int, tp: *mut Timespec) -> c_int;
-    }
-    const CLOCK_THREAD_CPUTIME_ID: c_int = 3;
-    let mut ts = Timespec {
+    let mut ts = libc::timespec {
         tv_sec: 0,
         tv_nsec: 0,
     };
     // SAFETY: clock_gettime writes one timespec to the pointer it is given, which is valid.
-    let ok = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0;
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts) } == 0;
     let secs = u64::try_from(ts.tv_sec).ok()?;
     let nanos = u64::try_from(ts.tv_nsec).ok()?;
     ok.then(|| secs.saturating_mul(1_000_000_000).saturating_add(nanos))
