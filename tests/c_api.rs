@@ -884,11 +884,13 @@ fn c_embedded() {
 /// grids in heavy cells — the walk's one cold copy per query kind, the run-time-axes kernel it uses,
 /// the nested build — raised to 407 000; 387 424 at stop 27, 412 000 at stop 28 with the filter's
 /// window check inline in every walk (out of line, 8 192 bytes less and the rays as slow as without
-/// it: measured), raised to 428 000; 416 096 at stop 33, whose AVX walks this build leaves out).
+/// it: measured), raised to 428 000; 416 096 at stop 33, whose AVX walks this build leaves out;
+/// 424 288 at stop 42; 428 384 at stop 43 with the selector's clock, its timed check and the
+/// re-check of a kd-tree in `rq_scene_update` (one page more), raised to 450 000).
 /// To raise it on purpose: run
 /// `cargo test --test c_api embedded_minimal -- --nocapture`, note the size it prints, set this to
 /// about 5 % above it, and update docs/embedded.md.
-const MINIMAL_PROGRAM_BUDGET: u64 = 428_000;
+const MINIMAL_PROGRAM_BUDGET: u64 = 450_000;
 
 #[test]
 #[cfg(all(target_os = "linux", target_arch = "x86_64"))]
