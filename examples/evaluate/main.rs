@@ -220,6 +220,44 @@ struct Measured {
     bounce_check: Option<BounceCheck>,
 }
 
+/// Scene `m`'s check on bounce samples, and its observation with the bounces' measured times per
+/// ray in place of the workload's (`None` where it has no bounces).
+fn on_bounces(m: &Measured) -> Option<(&BounceCheck, Observation)> {
+    let (b, (kd, grid)) = (m.bounce_check.as_ref()?, m.by_kind[1]?);
+    let o = Observation {
+        grid_ray_ns: grid,
+        kd_ray_ns: kd,
+        ..m.obs
+    };
+    Some((b, o))
+}
+
+/// AUTO / oracle over scenes × budgets: every value, and the worst with where it was.
+#[derive(Default)]
+struct Regrets {
+    all: Vec<f64>,
+    worst: (f64, String),
+}
+
+impl Regrets {
+    fn add(&mut self, x: f64, scene: &str, r: f64) {
+        self.all.push(x);
+        if x > self.worst.0 {
+            self.worst = (x, format!("{scene} at {r:.0e}"));
+        }
+    }
+
+    /// "geometric mean M and worst W (where)".
+    fn summary(&self) -> String {
+        format!(
+            "geometric mean {:.3} and worst {:.3} ({})",
+            geomean(&self.all),
+            self.worst.0,
+            self.worst.1
+        )
+    }
+}
+
 /// The check after a kd-tree build on bounce samples: both structures' counts, their plain passes'
 /// times and their counted passes' (the sampling's and the priced check's cost), ns.
 struct BounceCheck {
@@ -826,15 +864,10 @@ fn check_section(md: &mut String, results: &[Measured]) {
     );
     // AUTO for such a renderer on a workload of bounces: its estimate from the bounce samples (the
     // built-in calibration), its check priced or timed, totals against the bounces' measured times.
-    let mut regret: [(Vec<f64>, (f64, String)); 2] = Default::default();
+    let mut regret: [Regrets; 2] = Default::default();
     for m in results {
-        let (Some(b), Some((kd, grid))) = (&m.bounce_check, m.by_kind[1]) else {
+        let Some((b, o)) = on_bounces(m) else {
             continue;
-        };
-        let o = Observation {
-            grid_ray_ns: grid,
-            kd_ray_ns: kd,
-            ..m.obs
         };
         for (j, (confirmed, check_ns)) in [
             (
@@ -858,11 +891,7 @@ fn check_section(md: &mut String, results: &[Measured]) {
             };
             for r in budgets() {
                 let t = totals(&o, &sel, &sel, r, TRIAL_SHARE);
-                let x = t.auto_known / t.oracle;
-                regret[j].0.push(x);
-                if x > regret[j].1 .0 {
-                    regret[j].1 = (x, format!("{} at {r:.0e}", m.name));
-                }
+                regret[j].add(t.auto_known / t.oracle, &m.name, r);
             }
         }
     }
@@ -870,14 +899,9 @@ fn check_section(md: &mut String, results: &[Measured]) {
         md,
         "\nAUTO for that renderer on a workload of bounces (known budgets 10³..10⁸, the estimate \
          from the bounce samples with the built-in calibration, totals against the bounces' measured \
-         times): regret geometric mean {:.3} and worst {:.3} ({}) with the check priced, {:.3} and \
-         {:.3} ({}) timed.",
-        geomean(&regret[0].0),
-        regret[0].1 .0,
-        regret[0].1 .1,
-        geomean(&regret[1].0),
-        regret[1].1 .0,
-        regret[1].1 .1
+         times): regret {} with the check priced, {} timed.",
+        regret[0].summary(),
+        regret[1].summary()
     );
 }
 
@@ -1304,16 +1328,12 @@ fn analyse(results: &[Measured], args: &Args) -> String {
     // (`Scene::update`, with a clock): timed on the kd-tree, a grid built, timed on it, the faster
     // kept. Batches of 1 % of the budget or 20 000 rays (enough to tap 256), the verdict the timed
     // check's on the bounce samples, the cost the grid's build and three passes of 1 024 rays.
-    let mut regret: [(Vec<f64>, (f64, String)); 2] = Default::default();
+    let mut regret: [Regrets; 2] = Default::default();
     for (i, m) in results.iter().enumerate() {
-        let (Some(b), Some((kd, grid))) = (&m.bounce_check, m.by_kind[1]) else {
+        let Some((b, o)) = on_bounces(m) else {
             continue;
         };
-        let o = Observation {
-            grid_ray_ns: grid,
-            kd_ray_ns: kd,
-            ..m.obs
-        };
+        let (kd, grid) = (o.kd_ray_ns, o.grid_ray_ns);
         for r in budgets() {
             let sel = selector(i, r);
             let t = totals(&o, &sel, &selector(i, 0.0), r, TRIAL_SHARE);
@@ -1329,11 +1349,7 @@ fn analyse(results: &[Measured], args: &Args) -> String {
                 t.auto_known
             };
             for (j, total) in [t.auto_known, rechecked].into_iter().enumerate() {
-                let x = total / t.oracle;
-                regret[j].0.push(x);
-                if x > regret[j].1 .0 {
-                    regret[j].1 = (x, format!("{} at {r:.0e}", m.name));
-                }
+                regret[j].add(total / t.oracle, &m.name, r);
             }
         }
     }
@@ -1341,16 +1357,12 @@ fn analyse(results: &[Measured], args: &Args) -> String {
         md,
         "\nAUTO for a renderer that traces bounces and passes no samples (its own samples decide, \
          the leave-one-out estimates; known budgets 10³..10⁸; totals against the bounces' measured \
-         times): regret geometric mean {:.3} and worst {:.3} ({}) were the kd-tree it keeps final; \
-         {:.3} and {:.3} ({}) with the library's check of that kd-tree on the tapped queries after \
-         the first batch (simulated: batches of 1 % of the budget or 20 000 rays, the timed check's \
-         verdict on the bounce samples, a grid build and three passes of 1 024 rays).",
-        geomean(&regret[0].0),
-        regret[0].1 .0,
-        regret[0].1 .1,
-        geomean(&regret[1].0),
-        regret[1].1 .0,
-        regret[1].1 .1
+         times): regret {} were the kd-tree it keeps final; {} with the library's check of that \
+         kd-tree on the tapped queries after the first batch (simulated: batches of 1 % of the \
+         budget or 20 000 rays, the timed check's verdict on the bounce samples, a grid build and \
+         three passes of 1 024 rays).",
+        regret[0].summary(),
+        regret[1].summary()
     );
 
     // Charts.
