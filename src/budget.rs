@@ -21,7 +21,7 @@ pub struct MemoryMonitor {
 }
 
 // SAFETY: the pointer is only handed back to the caller's callback, and `MemoryMonitor::new`'s
-// contract makes the caller answer for calling it from any thread that builds or updates a scene.
+// contract makes the caller answer for calling it from any thread, at once, while a copy exists.
 unsafe impl Send for MemoryMonitor {}
 // SAFETY: as for Send; a shared MemoryMonitor is only ever read.
 unsafe impl Sync for MemoryMonitor {}
@@ -30,8 +30,9 @@ impl MemoryMonitor {
     /// A monitor that calls `callback(user, bytes)`; `true` lets the allocation go ahead.
     ///
     /// # Safety
-    /// `callback` must be safe to call with `user` from any thread that builds or updates a scene
-    /// holding this monitor, for as long as such a scene exists, and must not unwind.
+    /// `callback` must be safe to call with `user` from any thread, possibly from several at once
+    /// (scenes built on different threads may share a monitor), for as long as this monitor or
+    /// any copy of it exists (`allows` is public and the monitor is `Copy`), and must not unwind.
     pub const unsafe fn new(
         callback: unsafe extern "C" fn(user: *mut c_void, bytes: usize) -> bool,
         user: *mut c_void,

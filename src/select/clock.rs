@@ -17,7 +17,7 @@ pub struct Clock {
 }
 
 // SAFETY: the pointer is only handed back to the caller's function, and `Clock::new`'s contract
-// makes the caller answer for calling it from any thread that builds or updates a scene.
+// makes the caller answer for calling it from any thread, at once, while a copy exists.
 unsafe impl Send for Clock {}
 // SAFETY: as for Send; a shared Clock is only ever read.
 unsafe impl Sync for Clock {}
