@@ -6,7 +6,10 @@
  *
  *   --budget known    count the rays up front (width * height * spp * (1 + bounces), an upper bound)
  *                     and pass it as rq_build_options.expected_rays with RQ_STRUCTURE_AUTO: the
- *                     selector builds the grid or the kd-tree once.
+ *                     selector builds the grid or the kd-tree; after every pass the program tells
+ *                     the scene the rays traced and those that may remain, so that a kd-tree chosen
+ *                     on the library's own sample rays is checked once on this program's rays (it
+ *                     may go back to the grid: outcome GRID_FASTER_PER_RAY).
  *   --budget unknown  expected_rays = 0: the scene starts on the grid; after every pass (one sample
  *                     per pixel) the program tells it how many rays it traced with rq_scene_update,
  *                     and the scene switches to the kd-tree once the time lost on the grid reaches
@@ -657,8 +660,9 @@ int main(int argc, char **argv) {
     goto done;
   }
 
-  /* 4. Render pass by pass. With an unknown budget, report each pass's rays between passes (never
-   *    during a query): that is where the scene may build the kd-tree and switch to it. */
+  /* 4. Render pass by pass. With AUTO, report each pass's rays between passes (never during a
+   *    query): that is where the scene may build the kd-tree and switch to it (unknown budget), or
+   *    check the kd-tree it chose on this program's own rays (known budget). */
   uint64_t total_rays = 0;
   double update_seconds = 0.0;
   double r0 = now_seconds();
@@ -669,14 +673,19 @@ int main(int argc, char **argv) {
       goto done;
     }
     total_rays += pass_rays;
-    /* A known or forced budget has nothing left to decide. After the last pass no rays remain, and
-     * saying so (rather than 0, "unknown") keeps the scene from building a kd-tree no ray would use. */
-    if (a.budget != BUDGET_UNKNOWN) {
+    /* A forced structure has nothing left to decide. After the last pass no rays remain, and saying
+     * so (rather than 0, "unknown") keeps the scene from building a structure no ray would use. The
+     * known budget is an upper bound, so what may remain is the budget less the rays traced. */
+    if (a.budget != BUDGET_UNKNOWN && a.budget != BUDGET_KNOWN) {
       continue;
     }
+    uint64_t remaining = a.budget == BUDGET_UNKNOWN ? 0
+                         : options.expected_rays > total_rays ? options.expected_rays - total_rays
+                                                              : RQ_RAYS_REMAINING_NONE;
     rq_outcome before = rep.outcome;
+    rq_structure held = rep.structure;
     double u0 = now_seconds();
-    s = rq_scene_update(r.scene, pass_rays, pass + 1 == a.spp ? RQ_RAYS_REMAINING_NONE : 0);
+    s = rq_scene_update(r.scene, pass_rays, pass + 1 == a.spp ? RQ_RAYS_REMAINING_NONE : remaining);
     double u = now_seconds() - u0;
     update_seconds += u;
     if (s != RQ_STATUS_OK) {
@@ -690,6 +699,10 @@ int main(int argc, char **argv) {
     if (before != RQ_OUTCOME_ONLINE_SWITCHED && rep.outcome == RQ_OUTCOME_ONLINE_SWITCHED) {
       printf("pass %d/%d: switched to the kd-tree after %llu rays (W* estimate %.4g); the update took %.3f ms\n",
              pass + 1, a.spp, (unsigned long long)total_rays, rep.break_even_rays, u * 1e3);
+    } else if (held == RQ_STRUCTURE_KDTREE && rep.structure == RQ_STRUCTURE_GRID) {
+      printf("pass %d/%d: this program's rays took the kd-tree longer than a grid: back on the grid; the update "
+             "took %.3f ms\n",
+             pass + 1, a.spp, u * 1e3);
     }
   }
   double render_seconds = now_seconds() - r0;
