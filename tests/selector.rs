@@ -63,6 +63,16 @@ struct Script {
     slower_later: bool,
 }
 
+impl Script {
+    /// No readings yet.
+    fn new(slower_later: bool) -> Script {
+        Script {
+            readings: std::sync::atomic::AtomicU64::new(0),
+            slower_later,
+        }
+    }
+}
+
 /// `auto(expected_rays)` with a clock reading `script` (which must outlive every scene built with
 /// the options).
 fn scripted(expected_rays: u64, script: &Script) -> BuildOptions {
@@ -755,10 +765,7 @@ fn a_heavy_grid_cell_keeps_the_kd_tree_whatever_the_samples_say() {
 #[test]
 fn a_timed_check_keeps_the_kd_tree_only_if_the_clock_says_it_is_faster() {
     let outcome = |data: &rayq::mesh::MeshData, c: &Calibration, slower_later: bool, own: bool| {
-        let script = Script {
-            readings: std::sync::atomic::AtomicU64::new(0),
-            slower_later,
-        };
+        let script = Script::new(slower_later);
         let options = scripted(u64::MAX / 4, &script);
         let samples = test_rays(&mesh_of(data), 24, 0, 8);
         let given: Option<&dyn rayq::select::sample::RaySource> = (!own).then_some(&samples);
@@ -812,10 +819,7 @@ fn the_online_switch_keeps_a_kd_tree_the_clock_finds_slower_out() {
     // About one query in 64 is tapped: 20 000 give the tap the 256 it needs to be heard.
     let rays = test_rays(&mesh_of(&data), 140, 0, 9);
     for slower_later in [true, false] {
-        let script = Script {
-            readings: std::sync::atomic::AtomicU64::new(0),
-            slower_later,
-        };
+        let script = Script::new(slower_later);
         let mut scene = Scene::build(&data.as_source(), &scripted(0, &script), &c).unwrap();
         for _ in 0..2 {
             for r in &rays {
@@ -854,10 +858,7 @@ fn a_kd_tree_kept_on_the_library_samples_is_checked_again_on_the_tapped_queries(
     let mesh = mesh_of(&data);
     let rays = test_rays(&mesh, 140, 0, 10);
     for slower_later in [true, false] {
-        let script = Script {
-            readings: std::sync::atomic::AtomicU64::new(0),
-            slower_later,
-        };
+        let script = Script::new(slower_later);
         let mut scene =
             Scene::build(&data.as_source(), &scripted(u64::MAX / 4, &script), &c).unwrap();
         let r = scene.report();
@@ -913,4 +914,43 @@ fn a_kd_tree_kept_on_the_library_samples_is_checked_again_on_the_tapped_queries(
         timed.report().memory_bytes,
         r.memory_bytes + rayq::scene::TAP_RAYS * std::mem::size_of::<rayq::Ray>()
     );
+}
+
+/// The re-check holds both structures while it builds the grid: under a memory limit that holds
+/// the kd-tree's scene but not a grid beside it, the update fails with the limit, the scene keeps
+/// its kd-tree (same answers) and its tap goes, so the next update does not try again.
+#[test]
+fn a_re_check_that_does_not_fit_the_memory_limit_keeps_the_kd_tree() {
+    let data = kd_friendly();
+    let c = calibration(100.0, 10_000.0);
+    let mesh = mesh_of(&data);
+    let rays = test_rays(&mesh, 140, 0, 11);
+    let script = Script::new(false);
+    let free = Scene::build(&data.as_source(), &scripted(u64::MAX / 4, &script), &c).unwrap();
+    let held = free.report().memory_bytes;
+    drop(free);
+    // The smallest limit (in steps of 1/64 above the kd-tree's scene) that the build fits.
+    let mut scene = (0..128)
+        .map(|k| BuildOptions {
+            memory_limit: held + k * held / 64,
+            ..scripted(u64::MAX / 4, &script)
+        })
+        .find_map(|o| Scene::build(&data.as_source(), &o, &c).ok())
+        .expect("some limit lets the build through");
+    let r = scene.report();
+    assert_eq!(r.structure, Structure::KdTree, "{r:?}");
+    let hits: Vec<_> = rays.iter().map(|ray| scene.intersect(ray)).collect();
+    let err = scene.update(rays.len() as u64, 0).unwrap_err();
+    assert!(matches!(err, BuildError::MemoryLimit { .. }), "{err:?}");
+    let after = scene.report();
+    assert_eq!(
+        (after.structure, after.outcome),
+        (Structure::KdTree, Outcome::AboveBreakEven)
+    );
+    assert!(after.memory_bytes < r.memory_bytes, "the tap is released");
+    for (ray, h) in rays.iter().zip(&hits) {
+        assert!(scene.intersect(ray).same_bits(h));
+    }
+    scene.update(rays.len() as u64, 0).unwrap();
+    assert_eq!(scene.report().structure, Structure::KdTree);
 }

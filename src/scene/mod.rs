@@ -427,26 +427,32 @@ impl Scene {
             self.tap = None;
             return Ok(());
         }
+        // Once only: the tap goes whatever happens below. Both structures are held while the grid
+        // is built, so the memory limit must hold them (and the tap, until this call ends); a
+        // refusal is the call's error, and the kd-tree stays.
+        let (Some(mut tap), Accel::KdTree(tree)) = (self.tap.take(), &self.accel) else {
+            return Ok(());
+        };
         let params = self.options.samples;
         // Each structure timed right after a counted pass of the same rays, as at the check
         // after a build (`keeps_kd_tree`): neither is timed cold.
-        let kd_ns = match (self.tap.as_mut(), &self.accel) {
-            (Some(tap), Accel::KdTree(tree)) => {
-                sample_kdtree(tree, &self.mesh, Some(&tap.rays()), &params);
-                time_samples(tree, &self.mesh, Some(&tap.rays()), &params, &clock)
-            }
-            _ => return Ok(()),
-        };
-        // Both held while the grid is built: the memory limit must hold them. A refusal ends the
-        // re-check (it would only be refused again) and is the call's error; the kd-tree stays.
+        sample_kdtree(tree, &self.mesh, Some(&tap.rays()), &params);
+        let kd_ns = time_samples(tree, &self.mesh, Some(&tap.rays()), &params, &clock);
         let mut budget = self.options.budget();
         let built = budget
-            .charge(self.memory_bytes(), "the scene's mesh and kd-tree")
+            .charge(
+                self.memory_bytes() + tap.memory_bytes(),
+                "the scene's mesh, kd-tree and tap",
+            )
             .and_then(|()| UniformGrid::build(&self.mesh, &self.options.grid, &mut budget));
-        let (grid, Some(mut tap)) = (built, self.tap.take()) else {
-            return Ok(());
+        let grid = match built {
+            Ok(grid) => grid,
+            Err(e) => {
+                // The tap is gone: the report's bytes say so.
+                self.refresh_report();
+                return Err(e);
+            }
         };
-        let grid = grid?;
         let features = sample_grid(&grid, &self.mesh, Some(&tap.rays()), &params);
         let grid_ns = time_samples(&grid, &self.mesh, Some(&tap.rays()), &params, &clock);
         if grid_ns > 0 && grid_ns < kd_ns && !features.has_heavy_cell() {
