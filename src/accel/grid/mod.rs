@@ -16,6 +16,7 @@ use crate::triangle::{Accept, Block4, TriangleTest};
 
 mod blocks;
 mod build;
+mod content;
 mod layout;
 mod nested;
 #[cfg(test)]
@@ -99,8 +100,9 @@ enum Lists {
 ///   test would hit;
 /// - each cell's list is sorted by primitive id; with the packed layout it fills whole blocks of
 ///   four (gap lanes hold `Hit::INVALID_ID` and NaN);
-/// - `offsets.len() == cells + 1`, `offsets` is non-decreasing and ends at the number of blocks
-///   (packed) or ids (indexed).
+/// - `offsets.len() == cells + 1`; without their top bit (`content::SLAB_FLAG`, set on a cell's
+///   first offset when its content slab is worth a test) `offsets` is non-decreasing and ends at
+///   the number of blocks (packed) or ids (indexed), which is below the flag.
 #[derive(Debug)]
 pub struct UniformGrid {
     shape: Shape,
@@ -119,6 +121,9 @@ pub struct UniformGrid {
     /// Lists at least this long (in the lists' units) may have a nested grid; `usize::MAX` when
     /// none has.
     nested_span: usize,
+    /// Each cell's content slab (content.rs), for the plain walk; none for the indexed layout and
+    /// for nested grids.
+    content: content::Content,
 }
 
 /// What one query did, for the selector's deterministic cost model.
@@ -167,10 +172,20 @@ impl UniformGrid {
                 blocks: Blocks::default(),
                 nested: Vec::new(),
                 nested_span: usize::MAX,
+                content: content::Content::default(),
             });
         }
         let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
         nested::nest(&mut grid, mesh, params, budget, 0);
+        if let Lists::Packed { tris, .. } = &grid.lists {
+            match content::Content::new(&grid.shape, &mut grid.offsets, tris, budget) {
+                Ok(boxes) => grid.content = boxes,
+                Err(e) => {
+                    grid.release(budget);
+                    return Err(e);
+                }
+            }
+        }
         Ok(grid)
     }
 
@@ -197,6 +212,7 @@ impl UniformGrid {
             blocks: Blocks::default(),
             nested: Vec::new(),
             nested_span: usize::MAX,
+            content: content::Content::default(),
         };
         let offsets = &grid.offsets;
         let occupied = |c: usize| offsets.get(c) != offsets.get(c + 1);
@@ -239,10 +255,11 @@ impl UniformGrid {
         self.largest_cell
     }
 
-    /// Bytes the grid holds (offsets, block bits, references and their triangle packs, nested
-    /// grids).
+    /// Bytes the grid holds (offsets, block bits, references and their triangle packs, content
+    /// boxes, nested grids).
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.offsets)
+            + self.content.memory_bytes()
             + self.blocks.memory_bytes()
             + bytes_of(&self.nested)
             + self
@@ -279,6 +296,7 @@ impl UniformGrid {
         }
         budget.free(self.nested);
         budget.free(self.offsets);
+        self.content.release(budget);
         self.blocks.release(budget);
         match self.lists {
             Lists::Packed { ids, tris } => {
@@ -323,6 +341,14 @@ impl UniformGrid {
     /// cell inside the grid (walk.rs), so the flat index is below the product of the resolution.
     #[inline(always)]
     fn span(&self, index: usize) -> (usize, usize) {
+        let (first, end, _) = self.cell(index);
+        (first, end)
+    }
+
+    /// [`UniformGrid::span`], and whether the cell has a content slab worth a test (content.rs):
+    /// the flag bit of its offset, so that the walk learns it from the values it loads anyway.
+    #[inline(always)]
+    fn cell(&self, index: usize) -> (usize, usize, bool) {
         debug_assert!(index + 1 < self.offsets.len());
         // SAFETY: `index < cells` (above) and `offsets.len() == cells + 1` (the type's guarantees).
         let (lo, hi) = unsafe {
@@ -331,7 +357,11 @@ impl UniformGrid {
                 *self.offsets.get_unchecked(index + 1),
             )
         };
-        (lo as usize, hi as usize)
+        (
+            (lo & !content::SLAB_FLAG) as usize,
+            (hi & !content::SLAB_FLAG) as usize,
+            lo & content::SLAB_FLAG != 0,
+        )
     }
 
     /// Tests the triangles of a cell's list `(first, end)` (from [`UniformGrid::span`], not empty),
@@ -348,8 +378,9 @@ impl UniformGrid {
         match &self.lists {
             Lists::Packed { ids, tris } => {
                 debug_assert!(first <= end && end <= tris.len() && tris.len() == ids.len());
-                // SAFETY: offsets are non-decreasing and end at the number of blocks, which both
-                // arrays hold (the type's guarantees), so `first <= end <= len`.
+                // SAFETY: offsets (without their flag bit) are non-decreasing and end at the number
+                // of blocks, which both arrays hold (the type's guarantees), so
+                // `first <= end <= len`.
                 let (ids, tris) = unsafe {
                     (
                         ids.get_unchecked(first..end),

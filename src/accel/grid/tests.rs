@@ -292,6 +292,71 @@ fn skipping_empty_blocks_lists_what_the_cell_walk_lists() {
     assert!(skipped_any, "no ray stepped over an empty block");
 }
 
+/// Content slabs (content.rs): a cell whose triangles lie in a thin slab is passed over by a line
+/// that misses the slab in its window, and no hit is lost. On a stadium (a floor of large
+/// triangles at z = 0 and a sphere on it): a floor cell's slab is passed by a line going up from
+/// above it and not by one going down; and rays leaving the floor upwards from heights down to 0,
+/// grazing it, lying in its plane, starting on it with `tmin` 0 or above it, and aimed at the
+/// sphere past the floor, all agree with brute force (closest hit bit for bit, any hit).
+#[test]
+fn content_slabs_pass_over_cells_and_lose_no_hit() {
+    let data = procedural::teapot_in_stadium(2_000, 2_000);
+    let mut budget = MemoryBudget::new(0);
+    let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+    let shape = grid.shape;
+    let cell_of = |p: Vec3| {
+        let c = ((p - shape.bounds.min) / shape.cell_size).floor();
+        c.x as usize + shape.res[0] as usize * (c.y as usize + shape.res[1] as usize * c.z as usize)
+    };
+    let index = cell_of(Vec3::new(300.0, 200.0, 0.0));
+    assert!(grid.cell(index).2, "a floor cell's slab is worth a test");
+    let line = |dz: f32, t1: f32| match walk::Plan::entering(
+        &grid,
+        &Ray::segment(
+            Vec3::new(300.0, 200.0, 0.5),
+            Vec3::new(0.0, 0.0, dz),
+            0.0,
+            t1,
+        ),
+    ) {
+        Some(walk::Plan::Walk(line)) => line,
+        _ => panic!("the ray walks the grid"),
+    };
+    assert!(grid
+        .content
+        .misses(index, &line(1.0, f32::INFINITY), f32::INFINITY));
+    assert!(!grid
+        .content
+        .misses(index, &line(-1.0, f32::INFINITY), f32::INFINITY));
+    // The window matters: going down, the floor is at t = 0.5.
+    assert!(grid.content.misses(index, &line(-1.0, 0.49), 0.49));
+    assert!(!grid.content.misses(index, &line(-1.0, 0.51), 0.51));
+
+    let mut rng = crate::workload::SplitMix64::new(0x51ab);
+    let mut rays = Vec::new();
+    for _ in 0..4000 {
+        let on = Vec3::new(
+            -500.0 + 1000.0 * rng.next_f32(),
+            -300.0 + 600.0 * rng.next_f32(),
+            0.0,
+        );
+        let h = [0.0, 1e-7, 1e-4, 0.01, 0.6][(rng.next_u64() % 5) as usize];
+        let org = on + Vec3::new(0.0, 0.0, h);
+        let flat = Vec3::new(rng.next_f32() - 0.5, rng.next_f32() - 0.5, 0.0);
+        let dz = [0.0, 1e-6, -1e-6, 0.3, -0.3, 1.0][(rng.next_u64() % 6) as usize];
+        let d = flat + Vec3::new(0.0, 0.0, dz);
+        rays.push(Ray::new(org, d));
+        rays.push(Ray::segment(org, d, 1e-3, f32::MAX));
+        rays.push(Ray::segment(org, d, 0.0, 50.0 * rng.next_f32()));
+        // At the sphere, across the floor cells around it.
+        rays.push(Ray::new(org, Vec3::new(0.0, 0.0, 0.5) - org));
+    }
+    for ray in &rays {
+        agree(&mesh, &grid, ray);
+    }
+}
+
 /// Rejects the hits of odd-numbered triangles (an accepting query's filter).
 struct EvenOnly;
 
@@ -506,7 +571,7 @@ fn built_lists_are_the_voxelization() {
                     }
                 }
                 for (c, want) in want.iter().enumerate() {
-                    let (start, end) = (grid.offsets[c] as usize, grid.offsets[c + 1] as usize);
+                    let (start, end) = grid.span(c);
                     let got: Vec<u32> = match &grid.lists {
                         Lists::Packed { ids, .. } => ids[start..end]
                             .as_flattened()

@@ -36,10 +36,10 @@ const SUBNORMAL_T_ERROR: f64 = 2.242_077_542_919_707_3e-44;
 /// whose exit lies beyond the best hit.
 #[derive(Clone, Copy)]
 pub(super) struct Line {
-    org: Vec3,
+    pub(super) org: Vec3,
     dir: Vec3,
-    inv: Vec3,
-    t0: f32,
+    pub(super) inv: Vec3,
+    pub(super) t0: f32,
     t1: f32,
     early_exit: bool,
 }
@@ -400,8 +400,19 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             if COUNT {
                 work.cells += 1;
             }
-            let span = grid.span(index);
-            if span.0 != span.1 {
+            let (first, end, slab) = grid.cell(index);
+            let span = (first, end);
+            // The plain walk of a line from the ray's own origin passes over a cell whose content
+            // the line cannot reach in its window (content.rs; the line is read from memory only
+            // for a flagged cell). The counted walk tests it, so the work it counts, which the
+            // calibration prices, is what it was.
+            let passed = !COUNT
+                && slab
+                && match plan {
+                    Plan::Walk(l) => l.early_exit && grid.content.misses(index, &l, t_stop),
+                    _ => false,
+                };
+            if span.0 != span.1 && !passed {
                 // Only a list at least `nested_span` long may have a nested grid (usize::MAX when
                 // none has): the query then starts over in the nested walk, out of this loop. (Going
                 // on from here instead kept the position's values alive for the exit, and cost 10 %
