@@ -409,7 +409,10 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             let passed = !COUNT
                 && slab
                 && match plan {
-                    Plan::Walk(l) => l.early_exit && grid.content.misses(index, &l, t_stop),
+                    // SAFETY: the cell is flagged (`slab`).
+                    Plan::Walk(l) => {
+                        l.early_exit && unsafe { grid.content.misses(index, &l, t_stop) }
+                    }
                     _ => false,
                 };
             if span.0 != span.1 && !passed {
