@@ -8,7 +8,7 @@
 //! because it meets that cell enlarged by the margin. That cell's slab holds every point of its
 //! listed triangles within twice the margin of the cell (each triangle's bounds, which hold its
 //! points exactly, cut to that enlarged cell), so it holds `P`; the test widens the line's
-//! crossings of the slab's planes by more than their rounding, so a line through `P` at a `t`
+//! crossings of the slab's planes by more than their rounding (8 ulps), so a line through `P` at a `t`
 //! inside the window never misses it. Only lines walked from the ray's own origin use it (a far
 //! origin's line is off the ray by up to the margin).
 
@@ -33,8 +33,8 @@ struct Slab {
     axis: u32,
 }
 
-/// Relative slack of a computed crossing `(b − o)·inv`: two roundings and the inverse's, 8 ulps
-/// (as the kd-tree's clip).
+/// Relative slack of a computed crossing `(b − o)·inv`: 16u (8 ulps; three roundings — the
+/// difference, the product and the inverse — are at most about 3u, 6u with a subnormal inverse).
 const T_SLACK: f32 = 16.0 * U32;
 /// Absolute slack of a crossing: four of the smallest subnormal steps, for one that underflows.
 const T_FLOOR: f32 = 5.6e-45;
@@ -48,7 +48,8 @@ pub(super) const SLAB_FLAG: u32 = 1 << 31;
 /// The content slabs of a grid's cells (none for the indexed layout and nested grids): one slot
 /// per cell, written only for the flagged cells, so that a scene with few thin cells touches few of
 /// the slots' pages (written whole, the slots cost sibenik's, engine_2cyl's and dragon_res2's grid
-/// builds 6–9 % of their time, most of it first touches of fresh pages).
+/// builds 6–9 % of their time, most of it first touches of fresh pages; an array of 2 MiB or more
+/// gets the build's huge-page hint, whose pages are touched whole).
 #[derive(Debug, Default)]
 pub(super) struct Content {
     slabs: Vec<MaybeUninit<Slab>>,
@@ -56,8 +57,11 @@ pub(super) struct Content {
 
 impl Content {
     /// The content of a grid with packed lists `blocks` (cell `c`'s blocks are
-    /// `offsets[c]..offsets[c + 1]`, none flagged yet), charged to `budget`; flags the cells whose
-    /// slab is worth a test. None (and no flag) when the blocks reach the flag bit.
+    /// `offsets[c]..offsets[c + 1]`, none flagged yet), charged to `budget`, flagging the cells
+    /// whose slab is worth a test; none (nothing kept, nothing flagged) when no cell's is, or when
+    /// the blocks would reach the flag bit (they do not: a packed grid holds at most 2^30 blocks).
+    /// The slots are charged like the grid's other arrays: a build without room for them fails
+    /// whole (the allocation sweeps of tests/alloc_failure.rs hold every refusal to that).
     pub(super) fn new(
         shape: &Shape,
         offsets: &mut [u32],
@@ -72,6 +76,7 @@ impl Content {
         // SAFETY: the vector has room for `cells` (`vec` reserved them), and a `MaybeUninit`
         // needs no initialisation.
         unsafe { slabs.set_len(cells) };
+        let mut flagged = false;
         let (m, size) = (shape.margin, shape.cell_size);
         let [rx, ry, rz] = shape.res.map(|r| r as usize);
         let mut c = 0;
@@ -91,13 +96,23 @@ impl Content {
                             if let Some(slot) = slabs.get_mut(c) {
                                 slot.write(slab);
                             }
+                            flagged = true;
                         }
                     }
                     c += 1;
                 }
             }
         }
+        if !flagged {
+            budget.free(slabs);
+            return Ok(Content::default());
+        }
         Ok(Content { slabs })
+    }
+
+    /// Whether there are slabs (some cell is flagged).
+    pub(super) fn is_some(&self) -> bool {
+        !self.slabs.is_empty()
     }
 
     /// Whether `line` misses cell `index`'s slab for every `t` in `[line.t0, t1]` (so the walk may
