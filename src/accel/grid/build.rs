@@ -455,7 +455,15 @@ fn offsets(counts: &mut [u32], cells: usize, align: u64) -> Result<usize, BuildE
         *n = total as u32;
     }
     let total = round(total);
-    if total > u64::from(u32::MAX) {
+    // The offsets must stay below the content slabs' flag bit (content.rs): packed offsets count
+    // blocks, a quarter of the references, which then always do; indexed ones count ids, so an
+    // indexed grid holds fewer than 2^31 references.
+    let most = if align == 1 {
+        u64::from(super::content::SLAB_FLAG) - 1
+    } else {
+        u64::from(u32::MAX)
+    };
+    if total > most {
         return Err(BuildError::CapacityExceeded {
             what: "grid references",
         });

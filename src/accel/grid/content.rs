@@ -111,6 +111,7 @@ impl Content {
     }
 
     /// Whether there are slabs (some cell is flagged).
+    #[cfg(test)]
     pub(super) fn is_some(&self) -> bool {
         !self.slabs.is_empty()
     }

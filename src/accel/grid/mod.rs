@@ -100,10 +100,10 @@ enum Lists {
 ///   test would hit;
 /// - each cell's list is sorted by primitive id; with the packed layout it fills whole blocks of
 ///   four (gap lanes hold `Hit::INVALID_ID` and NaN);
-/// - `offsets.len() == cells + 1`; without the flag bit (`flag`: `content::SLAB_FLAG` on a cell's
-///   first offset when its content slab is worth a test, in a grid with slabs; none otherwise)
-///   `offsets` is non-decreasing and ends at the number of blocks (packed: at most 2^30, as the
-///   references are at most `u32::MAX`, so below the flag) or ids (indexed).
+/// - `offsets.len() == cells + 1`; without their top bit (`content::SLAB_FLAG`, set on a cell's
+///   first offset when its content slab is worth a test) `offsets` is non-decreasing and ends at
+///   the number of blocks (packed: at most 2^30, as the references are at most `u32::MAX`) or ids
+///   (indexed: below 2^31, build.rs), below the flag either way.
 #[derive(Debug)]
 pub struct UniformGrid {
     shape: Shape,
@@ -125,9 +125,6 @@ pub struct UniformGrid {
     /// Each cell's content slab (content.rs), for the plain walk; none for the indexed layout and
     /// for nested grids.
     content: content::Content,
-    /// The offsets' flag bit (`content::SLAB_FLAG`) when the grid has content slabs, else 0: an
-    /// indexed grid's offsets count ids and may use every bit.
-    flag: u32,
 }
 
 /// What one query did, for the selector's deterministic cost model.
@@ -177,19 +174,13 @@ impl UniformGrid {
                 nested: Vec::new(),
                 nested_span: usize::MAX,
                 content: content::Content::default(),
-                flag: 0,
             });
         }
         let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
         nested::nest(&mut grid, mesh, params, budget, 0);
         if let Lists::Packed { tris, .. } = &grid.lists {
             match content::Content::new(&grid.shape, &mut grid.offsets, tris, budget) {
-                Ok(content) => {
-                    if content.is_some() {
-                        grid.flag = content::SLAB_FLAG;
-                    }
-                    grid.content = content;
-                }
+                Ok(content) => grid.content = content,
                 Err(e) => {
                     grid.release(budget);
                     return Err(e);
@@ -223,7 +214,6 @@ impl UniformGrid {
             nested: Vec::new(),
             nested_span: usize::MAX,
             content: content::Content::default(),
-            flag: 0,
         };
         let offsets = &grid.offsets;
         let occupied = |c: usize| offsets.get(c) != offsets.get(c + 1);
@@ -369,9 +359,9 @@ impl UniformGrid {
             )
         };
         (
-            (lo & !self.flag) as usize,
-            (hi & !self.flag) as usize,
-            lo & self.flag != 0,
+            (lo & !content::SLAB_FLAG) as usize,
+            (hi & !content::SLAB_FLAG) as usize,
+            lo & content::SLAB_FLAG != 0,
         )
     }
 
