@@ -846,6 +846,14 @@ fn the_online_switch_keeps_a_kd_tree_the_clock_finds_slower_out() {
     }
 }
 
+/// The re-check's scene (kd-friendly), a calibration under which AUTO keeps a kd-tree on the
+/// library's own samples, and rays over it (`seed`).
+fn re_check_scene(seed: u64) -> (rayq::mesh::MeshData, Calibration, Vec<rayq::Ray>) {
+    let data = kd_friendly();
+    let rays = test_rays(&mesh_of(&data), 140, 0, seed);
+    (data, calibration(100.0, 10_000.0), rays)
+}
+
 /// A kd-tree kept on the library's own samples (priced) is checked once more on the renderer's
 /// rays when the scene has a clock: the first update with 256 tapped queries times them on the
 /// kd-tree, builds a grid and times them on it, and keeps whichever took less — the grid when the
@@ -853,10 +861,7 @@ fn the_online_switch_keeps_a_kd_tree_the_clock_finds_slower_out() {
 /// clock nothing is tapped on a kd-tree.
 #[test]
 fn a_kd_tree_kept_on_the_library_samples_is_checked_again_on_the_tapped_queries() {
-    let data = kd_friendly();
-    let c = calibration(100.0, 10_000.0);
-    let mesh = mesh_of(&data);
-    let rays = test_rays(&mesh, 140, 0, 10);
+    let (data, c, rays) = re_check_scene(10);
     for slower_later in [true, false] {
         let script = Script::new(slower_later);
         let mut scene =
@@ -921,10 +926,7 @@ fn a_kd_tree_kept_on_the_library_samples_is_checked_again_on_the_tapped_queries(
 /// its kd-tree (same answers) and its tap goes, so the next update does not try again.
 #[test]
 fn a_re_check_that_does_not_fit_the_memory_limit_keeps_the_kd_tree() {
-    let data = kd_friendly();
-    let c = calibration(100.0, 10_000.0);
-    let mesh = mesh_of(&data);
-    let rays = test_rays(&mesh, 140, 0, 11);
+    let (data, c, rays) = re_check_scene(11);
     let script = Script::new(false);
     let free = Scene::build(&data.as_source(), &scripted(u64::MAX / 4, &script), &c).unwrap();
     let held = free.report().memory_bytes;

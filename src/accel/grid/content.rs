@@ -45,6 +45,12 @@ const T_FLOOR: f32 = 5.6e-45;
 /// scenes whose slabs are seldom passed (hair-50k, soup-10k, dragon_res2).
 pub(super) const SLAB_FLAG: u32 = 1 << 31;
 
+#[cfg(all(test, feature = "std"))]
+std::thread_local! {
+    /// Cells the plain walk passed over on this thread (tests check that the walk uses the slabs).
+    pub(super) static PASSED: core::cell::Cell<usize> = const { core::cell::Cell::new(0) };
+}
+
 /// The content slabs of a grid's cells (none for the indexed layout and nested grids): one slot
 /// per cell, written only for the flagged cells, so that a scene with few thin cells touches few of
 /// the slots' pages (written whole, the slots cost sibenik's, engine_2cyl's and dragon_res2's grid

@@ -257,7 +257,7 @@ impl UniformGrid {
     }
 
     /// Bytes the grid holds (offsets, block bits, references and their triangle packs, content
-    /// boxes, nested grids).
+    /// slabs, nested grids).
     pub fn memory_bytes(&self) -> usize {
         bytes_of(&self.offsets)
             + self.content.memory_bytes()

@@ -357,9 +357,25 @@ fn content_slabs_pass_over_cells_and_lose_no_hit() {
     };
     let ids = UniformGrid::build(&mesh, &indexed, &mut budget).unwrap();
     assert!(!ids.content.is_some());
+    #[cfg(feature = "std")]
+    let passed_before = content::PASSED.with(|n| n.get());
     for ray in &rays {
         agree(&mesh, &grid, ray);
         agree(&mesh, &ids, ray);
+    }
+    // The walk used the slabs (otherwise the comparisons above would test nothing new): a ray
+    // going up from just above the floor passes its cell, and the set passes many.
+    #[cfg(feature = "std")]
+    {
+        let passed = content::PASSED.with(|n| n.get()) - passed_before;
+        assert!(
+            passed > rays.len() / 10,
+            "the walk passed over {passed} cells"
+        );
+        let before = content::PASSED.with(|n| n.get());
+        let up = Ray::new(Vec3::new(300.0, 200.0, 1e-3), Vec3::new(0.1, 0.05, 1.0));
+        agree(&mesh, &grid, &up);
+        assert!(content::PASSED.with(|n| n.get()) > before);
     }
 }
 
