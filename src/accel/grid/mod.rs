@@ -176,7 +176,15 @@ impl UniformGrid {
                 content: content::Content::default(),
             });
         }
-        let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
+        let mut grid = UniformGrid::build_over(
+            mesh,
+            Members::Mesh,
+            tight,
+            live,
+            params,
+            budget,
+            0 < nested::MAX_DEPTH,
+        )?;
         nested::nest(&mut grid, mesh, params, budget, 0);
         if let Lists::Packed { tris, .. } = &grid.lists {
             match content::Content::new(&grid.shape, &mut grid.offsets, tris, budget) {
@@ -191,7 +199,8 @@ impl UniformGrid {
     }
 
     /// A grid over `members` (`live` triangles, not zero) of `mesh`, in a box around `tight` (not
-    /// empty), without nested grids (nested.rs adds them).
+    /// empty), without nested grids (nested.rs adds them); `nests` says whether its dense cells
+    /// will get them, and so need not count in its resolution (`nested::sized_for`).
     fn build_over(
         mesh: &TriMesh,
         members: Members<'_>,
@@ -199,8 +208,14 @@ impl UniformGrid {
         live: usize,
         params: &GridParams,
         budget: &mut MemoryBudget,
+        nests: bool,
     ) -> Result<UniformGrid, BuildError> {
-        let shape = Shape::new(tight, live, params.density)?;
+        let sized = if nests {
+            nested::sized_for(mesh, members, tight, live, params, budget)
+        } else {
+            live
+        };
+        let shape = Shape::new(tight, sized, params.density)?;
         let built = build::lists(mesh, members, &shape, params, budget)?;
         let size = shape.cell_size;
         let mut grid = UniformGrid {

@@ -59,6 +59,82 @@ impl Nested {
     }
 }
 
+/// A heavy cell's triangle wider than this many cells of a grid over the whole cell (on some axis)
+/// is tested whole on entering the cell, not listed in its nested grid.
+const LARGE_CELLS: f32 = 8.0;
+
+/// Triangles sampled to find a dense object before a grid is sized: enough that a dense quarter
+/// shows as a hundred or more of them (stadium-1M's sphere: ~380), few enough to cost ~0.5 % of an
+/// ordinary build's instructions (bunny: 4 096 cost 3.8 %, 1 024 0.9 %, mostly the sort).
+const DENSE_SAMPLES: usize = 512;
+
+/// How many of the `live` triangles `members` of `mesh` (bounds `tight`) a grid whose dense cells
+/// will get nested grids is sized for: all of them, unless a sample says that at least a quarter
+/// lie in cells that will get nested grids — a detailed object in a big sparse scene (a teapot in
+/// a stadium). Such triangles are walked in their own grids, so counting them in the outer one only
+/// made its cells finer around the rest: stadium-1M's field was listed in 6.6 cells a triangle,
+/// in 350 000 cells for the 250 000 triangles outside the sphere (docs/performance.md, "Stop 45").
+///
+/// The sample is every `k`-th member's centroid in the cells of the grid sized for all of them
+/// (`k` making at most [`DENSE_SAMPLES`]); a cell holding `c ≥ 2` of them stands for `c·k`
+/// triangles and counts as dense from [`NESTED_MIN`]. One sample alone is not a cluster (above a
+/// million triangles `k` alone reaches it), and an ordinary scene's samples seldom share a cell:
+/// about `S²/(2·occupied cells)` pairs, far from a quarter of them. Below a quarter each axis's
+/// resolution would move by less than a tenth, so ordinary scenes keep their grid exactly.
+/// Deterministic; when the sample's memory is refused, every triangle counts.
+pub(super) fn sized_for(
+    mesh: &TriMesh,
+    members: Members<'_>,
+    tight: Aabb,
+    live: usize,
+    params: &GridParams,
+    budget: &mut MemoryBudget,
+) -> usize {
+    // Below this a dense quarter is one nested grid's worth, which a sample would cost a larger
+    // share of a small build to find.
+    if live < 4 * NESTED_MIN {
+        return live;
+    }
+    let Ok(shape) = Shape::new(tight, live, params.density) else {
+        return live;
+    };
+    let walked = members.len(mesh);
+    let stride = walked.div_ceil(DENSE_SAMPLES).max(1);
+    let Ok(mut cells) = budget.vec::<u32>(walked.div_ceil(stride), "grid density sample") else {
+        return live;
+    };
+    let res = shape.res.map(|r| r as usize);
+    let inv = Vec3::ONE / shape.cell_size;
+    let tris = mesh.triangles();
+    for i in (0..walked).step_by(stride) {
+        let p = members.prim(i);
+        let Some(tri) = tris.get(p) else {
+            continue;
+        };
+        if matches!(members, Members::Mesh) && mesh.is_degenerate(p as u32) {
+            continue;
+        }
+        let centroid = (tri[0] + tri[1] + tri[2]) * (1.0 / 3.0);
+        let k = ((centroid - shape.bounds.min) * inv).to_array();
+        // `as` saturates (NaN to 0); the clamp keeps a centroid rounded onto a far face inside.
+        let at = |a: usize| (k[a] as usize).min(res[a] - 1);
+        cells.push((at(0) + res[0] * (at(1) + res[1] * at(2))) as u32);
+    }
+    cells.sort_unstable();
+    let dense: usize = cells
+        .chunk_by(|a, b| a == b)
+        .filter(|run| run.len() >= 2)
+        .map(|run| run.len() * stride)
+        .filter(|&n| n >= NESTED_MIN)
+        .sum();
+    budget.free(cells);
+    if dense * 4 >= live {
+        live.saturating_sub(dense).max(1)
+    } else {
+        live
+    }
+}
+
 /// Gives each cell of `grid` listing at least [`NESTED_MIN`] triangles a nested grid over them,
 /// where one is expected to pay (see [`pays`]). Nested grids are optional: a cell whose nested grid
 /// cannot be built (the memory budget, or a grid whose margin would swamp its cells) keeps its
@@ -161,7 +237,13 @@ fn nest_cell(
         }
     };
     let tris = mesh.triangles();
-    let size = grid.shape.cell_size;
+    // A triangle wider than eight cells of a grid over the whole cell would be listed in dozens of
+    // them: it too is tested whole. (Where the outer grid was sized without a dense object,
+    // `sized_for`, its cell around the object holds parts of the sparse rest: a teapot's cell of a
+    // stadium's field, whose triangles are smaller than the cell but far larger than the teapot's.)
+    let whole = grid.shape.cell_size;
+    let size = Shape::new(enlarged_cell(grid, cell), room.max(1), params.density)
+        .map_or(whole, |sub| whole.min(sub.cell_size * LARGE_CELLS));
     let mut small_bounds = Aabb::EMPTY;
     for &p in list.iter().filter(|&&p| p != Hit::INVALID_ID) {
         let Some(tri) = tris.get(p as usize) else {
@@ -235,6 +317,7 @@ fn nest_small(
         small.len(),
         params,
         budget,
+        depth < MAX_DEPTH,
     )?;
     if !pays(&sub, large_list.len(), small.len() + large_list.len()) {
         sub.release(budget);

@@ -661,3 +661,35 @@ fn a_build_under_any_memory_limit_is_whole_or_nothing() {
         }
     }
 }
+
+/// A dense object in a sparse scene (a teapot in a stadium) does not set the outer grid's
+/// resolution: the outer grid is sized for the field, the object gets its nested grid over itself
+/// (the field's triangles in its cell, far larger than its own, are tested whole), and no list a
+/// walk tests whole is long. A scene without a dense object keeps the grid sized for all of it.
+#[test]
+fn a_dense_object_does_not_set_the_outer_grids_resolution() {
+    let mut budget = MemoryBudget::new(0);
+    let cells_for = |live: usize, tight: Aabb| {
+        Shape::new(tight, live, GridParams::DEFAULT.density)
+            .unwrap()
+            .cells()
+    };
+    for (sphere, field) in [(6_000, 2_000), (30_000, 10_000)] {
+        let data = procedural::teapot_in_stadium(sphere, field);
+        let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+        let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+        let (all, rest) = (
+            cells_for(mesh.len(), mesh.bounds()),
+            cells_for(field, mesh.bounds()),
+        );
+        assert!(grid.cell_count() * 2 < all && grid.cell_count() <= rest * 2);
+        assert!(grid.nested_count() >= 1);
+        assert!(grid.nested.iter().all(|n| n.large_count > 0));
+        assert!(grid.largest_cell() * 16 < sphere, "{}", grid.largest_cell());
+        grid.release(&mut budget);
+    }
+    let sphere = procedural::closed_sphere(60);
+    let mesh = TriMesh::from_source(&sphere.as_source(), &mut budget).unwrap();
+    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+    assert_eq!(grid.cell_count(), cells_for(mesh.len(), mesh.bounds()));
+}
