@@ -176,16 +176,17 @@ impl UniformGrid {
                 content: content::Content::default(),
             });
         }
-        let mut grid = UniformGrid::build_over(
-            mesh,
-            Members::Mesh,
-            tight,
-            live,
-            params,
-            budget,
-            0 < nested::MAX_DEPTH,
-        )?;
+        let outer = nested::sized_for(mesh, Members::Mesh, tight, live, params, budget);
+        let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, outer, params, budget)?;
         nested::nest(&mut grid, mesh, params, budget, 0);
+        if outer < live && nested::left_heavy(&grid) {
+            // Sized for nested grids that did not all come (the memory limit, a margin that swamps
+            // their cells, a grid that would not pay): the coarser cells' lists, tested whole, were
+            // 2.5–4× as long as the grid sized for every triangle gives (a review's finding).
+            grid.release(budget);
+            grid = UniformGrid::build_over(mesh, Members::Mesh, tight, live, params, budget)?;
+            nested::nest(&mut grid, mesh, params, budget, 0);
+        }
         if let Lists::Packed { tris, .. } = &grid.lists {
             match content::Content::new(&grid.shape, &mut grid.offsets, tris, budget) {
                 Ok(content) => grid.content = content,
@@ -198,9 +199,8 @@ impl UniformGrid {
         Ok(grid)
     }
 
-    /// A grid over `members` (`live` triangles, not zero) of `mesh`, in a box around `tight` (not
-    /// empty), without nested grids (nested.rs adds them); `nests` says whether its dense cells
-    /// will get them, and so need not count in its resolution (`nested::sized_for`).
+    /// A grid over `members` of `mesh` sized for `live` triangles (not zero), in a box around
+    /// `tight` (not empty), without nested grids (nested.rs adds them).
     fn build_over(
         mesh: &TriMesh,
         members: Members<'_>,
@@ -208,14 +208,8 @@ impl UniformGrid {
         live: usize,
         params: &GridParams,
         budget: &mut MemoryBudget,
-        nests: bool,
     ) -> Result<UniformGrid, BuildError> {
-        let sized = if nests {
-            nested::sized_for(mesh, members, tight, live, params, budget)
-        } else {
-            live
-        };
-        let shape = Shape::new(tight, sized, params.density)?;
+        let shape = Shape::new(tight, live, params.density)?;
         let built = build::lists(mesh, members, &shape, params, budget)?;
         let size = shape.cell_size;
         let mut grid = UniformGrid {

@@ -37,12 +37,13 @@ const NESTED_GAIN: f64 = 0.5;
 pub(super) struct Nested {
     /// The cell's flat index in the outer grid.
     pub cell: usize,
-    /// A grid over the cell's triangles no larger than the cell (with nested grids of its own
+    /// A grid over the cell's triangles that are not large (with nested grids of its own
     /// below [`MAX_DEPTH`]), in the box where their bounds meet the cell's box enlarged by two
     /// margins (and `Shape::new`'s padding around that).
     pub grid: UniformGrid,
-    /// The cell's triangles larger than the cell on some axis (a stadium's field around its
-    /// teapot), tested whole on entering it, four to a block (ids, gap lanes `Hit::INVALID_ID`)...
+    /// The cell's large triangles, wider on some axis than the cell or eight cells of a grid over
+    /// it (`LARGE_CELLS`; a stadium's field around its teapot), tested whole on entering it, four
+    /// to a block (ids, gap lanes `Hit::INVALID_ID`)...
     pub large_ids: Vec<[u32; 4]>,
     /// ...and their triangles (gap lanes NaN).
     pub large: Vec<Block4>,
@@ -77,11 +78,13 @@ const DENSE_SAMPLES: usize = 512;
 ///
 /// The sample is every `k`-th member's centroid in the cells of the grid sized for all of them
 /// (`k` making at most [`DENSE_SAMPLES`]); a cell holding `c ≥ 2` of them stands for `c·k`
-/// triangles and counts as dense from [`NESTED_MIN`]. One sample alone is not a cluster (above a
-/// million triangles `k` alone reaches it), and an ordinary scene's samples seldom share a cell:
-/// about `S²/(2·occupied cells)` pairs, far from a quarter of them. Below a quarter each axis's
-/// resolution would move by less than a tenth, so ordinary scenes keep their grid exactly.
-/// Deterministic; when the sample's memory is refused, every triangle counts.
+/// triangles and counts as dense from [`NESTED_MIN`]. One sample alone is not a cluster (from
+/// about half a million triangles `k` alone reaches it), and an ordinary scene's samples seldom
+/// share a cell: about `S²/(2·occupied cells)` pairs, far from a quarter of them. Below a quarter
+/// each axis's resolution would move by less than a tenth (an eighth on a flat scene's two), so
+/// ordinary scenes keep their grid exactly. Deterministic; when the sample's memory is refused,
+/// every triangle counts. The caller sizes for every triangle after all when a dense cell gets no
+/// nested grid ([`left_heavy`]).
 pub(super) fn sized_for(
     mesh: &TriMesh,
     members: Members<'_>,
@@ -183,6 +186,20 @@ pub(super) fn nest(
     grid.largest_cell = largest_tested(grid);
 }
 
+/// Whether a cell of `grid` lists at least [`NESTED_MIN`] triangles without a nested grid.
+pub(super) fn left_heavy(grid: &UniformGrid) -> bool {
+    let unit = match grid.lists {
+        Lists::Packed { .. } => 4,
+        Lists::Indexed { .. } => 1,
+    };
+    (0..grid.cell_count()).any(|c| {
+        let (first, end) = grid.span(c);
+        (end - first) * unit >= NESTED_MIN
+            && grid.listed(c) as usize >= NESTED_MIN
+            && grid.nested_at(c).is_none()
+    })
+}
+
 /// The longest list a walk of `grid` tests whole: of a cell without a nested grid, of a nested
 /// cell's large triangles, or of a cell of a nested grid.
 fn largest_tested(grid: &UniformGrid) -> usize {
@@ -206,7 +223,7 @@ fn largest_tested(grid: &UniformGrid) -> usize {
 }
 
 /// The nested grid (at `depth`, with its own nested grids) of `cell` when its list holds at least
-/// [`NESTED_MIN`] triangles, at most half of them larger than the cell, and the grid pays, else
+/// [`NESTED_MIN`] triangles, at most half of them large (`LARGE_CELLS`), and the grid pays, else
 /// `None`.
 fn nest_cell(
     grid: &UniformGrid,
@@ -225,7 +242,7 @@ fn nest_cell(
         }
         Lists::Indexed { ids, .. } => (ids.get(first..end).unwrap_or(&[]), end - first),
     };
-    // One pass: triangles larger than the cell on some axis would stretch the nested grid over the
+    // One pass: triangles wider than the cell on some axis would stretch the nested grid over the
     // whole cell (the field around a teapot), so they are tested whole; the rest gets the grid,
     // in the box of their bounds.
     let mut small = budget.vec::<u32>(room, "nested grid ids")?;
@@ -274,7 +291,7 @@ fn nest_cell(
     result
 }
 
-/// A heavy cell's triangles: those no larger than the cell, their bounds, and the larger ones.
+/// A heavy cell's triangles: those that are not large, their bounds, and the large ones.
 struct Split<'a> {
     small: &'a [u32],
     small_bounds: Aabb,
@@ -317,7 +334,6 @@ fn nest_small(
         small.len(),
         params,
         budget,
-        depth < MAX_DEPTH,
     )?;
     if !pays(&sub, large_list.len(), small.len() + large_list.len()) {
         sub.release(budget);

@@ -688,8 +688,16 @@ fn a_dense_object_does_not_set_the_outer_grids_resolution() {
         assert!(grid.largest_cell() * 16 < sphere, "{}", grid.largest_cell());
         grid.release(&mut budget);
     }
+    // Without a dense object, or with one that gets no nested grid (far from the origin, where the
+    // margin would swamp its cells), the grid is sized for every triangle.
     let sphere = procedural::closed_sphere(60);
-    let mesh = TriMesh::from_source(&sphere.as_source(), &mut budget).unwrap();
-    let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
-    assert_eq!(grid.cell_count(), cells_for(mesh.len(), mesh.bounds()));
+    let far = procedural::teapot_in_stadium(30_000, 10_000).transformed(1.0, [1e6, 1e6, 0.0]);
+    for data in [sphere, far] {
+        let mesh = TriMesh::from_source(&data.as_source(), &mut budget).unwrap();
+        let grid = UniformGrid::build(&mesh, &GridParams::DEFAULT, &mut budget).unwrap();
+        let live = mesh.len() - mesh.degenerate_count();
+        assert_eq!(grid.cell_count(), cells_for(live, mesh.bounds()));
+        assert_eq!(grid.nested_count(), 0);
+        grid.release(&mut budget);
+    }
 }
