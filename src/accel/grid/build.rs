@@ -37,7 +37,7 @@ pub(super) enum Members<'a> {
 
 impl Members<'_> {
     /// How many triangles the build walks (degenerate ones of the mesh included).
-    pub(super) fn len(&self, mesh: &TriMesh) -> usize {
+    fn len(&self, mesh: &TriMesh) -> usize {
         match self {
             Members::Mesh => mesh.len(),
             Members::Listed(ids) => ids.len(),
@@ -46,7 +46,7 @@ impl Members<'_> {
 
     /// The id of the `i`-th triangle walked.
     #[inline(always)]
-    pub(super) fn prim(&self, i: usize) -> usize {
+    fn prim(&self, i: usize) -> usize {
         match self {
             Members::Mesh => i,
             Members::Listed(ids) => ids.get(i).map_or(usize::MAX, |&p| p as usize),

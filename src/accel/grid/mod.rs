@@ -176,7 +176,7 @@ impl UniformGrid {
                 content: content::Content::default(),
             });
         }
-        let outer = nested::sized_for(mesh, Members::Mesh, tight, live, params, budget);
+        let outer = nested::sized_for(mesh, tight, live, params, budget);
         let mut grid = UniformGrid::build_over(mesh, Members::Mesh, tight, outer, params, budget)?;
         nested::nest(&mut grid, mesh, params, budget, 0);
         if outer < live && nested::left_heavy(&grid) {

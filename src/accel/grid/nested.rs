@@ -65,18 +65,18 @@ impl Nested {
 const LARGE_CELLS: f32 = 8.0;
 
 /// Triangles sampled to find a dense object before a grid is sized: enough that a dense quarter
-/// shows as a hundred or more of them (stadium-1M's sphere: ~380), few enough to cost ~0.5 % of an
+/// shows as a hundred or more of them (three quarters on stadium-1M), few enough to cost ~0.5 % of an
 /// ordinary build's instructions (bunny: 4 096 cost 3.8 %, 1 024 0.9 %, mostly the sort).
 const DENSE_SAMPLES: usize = 512;
 
-/// How many of the `live` triangles `members` of `mesh` (bounds `tight`) a grid whose dense cells
-/// will get nested grids is sized for: all of them, unless a sample says that at least a quarter
+/// How many of the `live` triangles of `mesh` (bounds `tight`) the outer grid, whose dense cells
+/// get nested grids, is sized for: all of them, unless a sample says that at least a quarter
 /// lie in cells that will get nested grids — a detailed object in a big sparse scene (a teapot in
 /// a stadium). Such triangles are walked in their own grids, so counting them in the outer one only
 /// made its cells finer around the rest: stadium-1M's field was listed in 6.6 cells a triangle,
 /// in 350 000 cells for the 250 000 triangles outside the sphere (docs/performance.md, "Stop 45").
 ///
-/// The sample is every `k`-th member's centroid in the cells of the grid sized for all of them
+/// The sample is every `k`-th triangle's centroid in the cells of the grid sized for all of them
 /// (`k` making at most [`DENSE_SAMPLES`]); a cell holding `c ≥ 2` of them stands for `c·k`
 /// triangles and counts as dense from [`NESTED_MIN`]. One sample alone is not a cluster (from
 /// about half a million triangles `k` alone reaches it), and an ordinary scene's samples seldom
@@ -87,7 +87,6 @@ const DENSE_SAMPLES: usize = 512;
 /// nested grid ([`left_heavy`]).
 pub(super) fn sized_for(
     mesh: &TriMesh,
-    members: Members<'_>,
     tight: Aabb,
     live: usize,
     params: &GridParams,
@@ -101,20 +100,15 @@ pub(super) fn sized_for(
     let Ok(shape) = Shape::new(tight, live, params.density) else {
         return live;
     };
-    let walked = members.len(mesh);
-    let stride = walked.div_ceil(DENSE_SAMPLES).max(1);
-    let Ok(mut cells) = budget.vec::<u32>(walked.div_ceil(stride), "grid density sample") else {
+    let stride = mesh.len().div_ceil(DENSE_SAMPLES).max(1);
+    let Ok(mut cells) = budget.vec::<u32>(mesh.len().div_ceil(stride), "grid density sample")
+    else {
         return live;
     };
     let res = shape.res.map(|r| r as usize);
     let inv = Vec3::ONE / shape.cell_size;
-    let tris = mesh.triangles();
-    for i in (0..walked).step_by(stride) {
-        let p = members.prim(i);
-        let Some(tri) = tris.get(p) else {
-            continue;
-        };
-        if matches!(members, Members::Mesh) && mesh.is_degenerate(p as u32) {
+    for (i, tri) in mesh.triangles().iter().enumerate().step_by(stride) {
+        if mesh.is_degenerate(i as u32) {
             continue;
         }
         let centroid = (tri[0] + tri[1] + tri[2]) * (1.0 / 3.0);
@@ -188,38 +182,34 @@ pub(super) fn nest(
 
 /// Whether a cell of `grid` lists at least [`NESTED_MIN`] triangles without a nested grid.
 pub(super) fn left_heavy(grid: &UniformGrid) -> bool {
-    let unit = match grid.lists {
-        Lists::Packed { .. } => 4,
-        Lists::Indexed { .. } => 1,
-    };
-    (0..grid.cell_count()).any(|c| {
-        let (first, end) = grid.span(c);
-        (end - first) * unit >= NESTED_MIN
-            && grid.listed(c) as usize >= NESTED_MIN
-            && grid.nested_at(c).is_none()
-    })
+    longest_unnested(grid) >= NESTED_MIN
 }
 
 /// The longest list a walk of `grid` tests whole: of a cell without a nested grid, of a nested
 /// cell's large triangles, or of a cell of a nested grid.
 fn largest_tested(grid: &UniformGrid) -> usize {
+    grid.nested
+        .iter()
+        .map(|n| n.grid.largest_cell.max(n.large_count as usize))
+        .fold(longest_unnested(grid), usize::max)
+}
+
+/// The longest list of a cell of `grid` without a nested grid.
+fn longest_unnested(grid: &UniformGrid) -> usize {
     let unit = match grid.lists {
         Lists::Packed { .. } => 4,
         Lists::Indexed { .. } => 1,
     };
     // A list holds at most `unit` ids per unit of its span, so only a list whose span could beat
     // the longest so far has its ids counted (a pass over every id was ~10 % of sibenik's build).
-    let mut outer = 0;
+    let mut longest = 0;
     for c in 0..grid.cell_count() {
         let (first, end) = grid.span(c);
-        if (end - first) * unit > outer && grid.nested_at(c).is_none() {
-            outer = outer.max(grid.listed(c) as usize);
+        if (end - first) * unit > longest && grid.nested_at(c).is_none() {
+            longest = longest.max(grid.listed(c) as usize);
         }
     }
-    grid.nested
-        .iter()
-        .map(|n| n.grid.largest_cell.max(n.large_count as usize))
-        .fold(outer, usize::max)
+    longest
 }
 
 /// The nested grid (at `depth`, with its own nested grids) of `cell` when its list holds at least
