@@ -510,6 +510,45 @@ fn example_minimal() {
     );
 }
 
+/// examples/buildtime.c compiles strictly and times as many builds as asked, of the structure asked,
+/// and refuses a file it cannot read.
+#[test]
+fn example_buildtime() {
+    let teapot = root().join("scenes/teapot.obj");
+    let teapot = teapot.to_str().expect("UTF-8 path");
+    let dir = scratch("example_buildtime");
+    let exe = build_program(
+        &dir,
+        "buildtime",
+        &root().join("examples/buildtime.c"),
+        &["-DRQ_WITH_OBJ"],
+    );
+    for (structure, builds) in [("grid", 3), ("kdtree", 2)] {
+        let ran = run_program(&exe, &dir, &[teapot, &builds.to_string(), structure]);
+        assert!(
+            ran.success,
+            "{}",
+            ran.describe("examples/buildtime.c failed")
+        );
+        let lines: Vec<&str> = ran.stdout.lines().collect();
+        assert_eq!(lines.len(), builds, "{}", ran.describe("one line a build"));
+        for (i, line) in lines.iter().enumerate() {
+            assert!(
+                line.starts_with(&format!("build {i}: ")) && line.contains(" Mtri/s, "),
+                "{}",
+                ran.describe("a build's line")
+            );
+        }
+    }
+    let missing = dir.join("missing.obj");
+    let ran = run_program(&exe, &dir, &[missing.to_str().expect("UTF-8 path")]);
+    assert!(
+        !ran.success && ran.stderr.contains("rq_obj_load"),
+        "{}",
+        ran.describe("a missing scene must fail with the loader's status")
+    );
+}
+
 /// Reads a binary PPM: (width, height, pixels).
 fn read_ppm(path: &Path) -> (usize, usize, Vec<u8>) {
     let bytes = fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
