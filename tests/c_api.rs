@@ -510,8 +510,8 @@ fn example_minimal() {
     );
 }
 
-/// examples/buildtime.c compiles strictly and times as many builds as asked, of the structure asked,
-/// and refuses a file it cannot read.
+/// examples/buildtime.c compiles strictly, times as many builds as asked and names the structure
+/// each made, and refuses bad arguments and a file it cannot read.
 #[test]
 fn example_buildtime() {
     let teapot = root().join("scenes/teapot.obj");
@@ -523,7 +523,7 @@ fn example_buildtime() {
         &root().join("examples/buildtime.c"),
         &["-DRQ_WITH_OBJ"],
     );
-    for (structure, builds) in [("grid", 3), ("kdtree", 2)] {
+    for (structure, builds, made) in [("grid", 3, "grid"), ("kdtree", 2, "kd-tree")] {
         let ran = run_program(&exe, &dir, &[teapot, &builds.to_string(), structure]);
         assert!(
             ran.success,
@@ -534,19 +534,31 @@ fn example_buildtime() {
         assert_eq!(lines.len(), builds, "{}", ran.describe("one line a build"));
         for (i, line) in lines.iter().enumerate() {
             assert!(
-                line.starts_with(&format!("build {i}: ")) && line.contains(" Mtri/s, "),
+                line.starts_with(&format!("build {i} ({made}): "))
+                    && line.contains(" Mtri/s, ")
+                    && line.ends_with(" page faults"),
                 "{}",
                 ran.describe("a build's line")
             );
         }
     }
     let missing = dir.join("missing.obj");
-    let ran = run_program(&exe, &dir, &[missing.to_str().expect("UTF-8 path")]);
-    assert!(
-        !ran.success && ran.stderr.contains("rq_obj_load"),
-        "{}",
-        ran.describe("a missing scene must fail with the loader's status")
-    );
+    let missing = missing.to_str().expect("UTF-8 path");
+    let refused: [&[&str]; 5] = [
+        &[missing],
+        &[teapot, "0"],
+        &[teapot, "kdtree"],
+        &[teapot, "2", "kd-tree"],
+        &[teapot, "2", "grid", "extra"],
+    ];
+    for args in refused {
+        let ran = run_program(&exe, &dir, args);
+        assert!(
+            !ran.success && ran.stdout.is_empty(),
+            "{}",
+            ran.describe(&format!("{args:?} must be refused before any build"))
+        );
+    }
 }
 
 /// Reads a binary PPM: (width, height, pixels).
