@@ -4,6 +4,7 @@
 use alloc::vec::Vec;
 use core::ffi::c_void;
 
+use crate::bigvec::BigVec;
 use crate::error::BuildError;
 
 /// A caller's callback that is told, before each allocation of a build, how many bytes the build would
@@ -208,6 +209,43 @@ impl MemoryBudget {
         self.reserve_to(v, cap, what)
     }
 
+    /// An empty [`BigVec`] with room for exactly `len` elements, charged to the budget (its
+    /// block starts on a huge page when it is large).
+    pub fn big_vec<T: Copy>(
+        &mut self,
+        len: usize,
+        what: &'static str,
+    ) -> Result<BigVec<T>, BuildError> {
+        let bytes = len
+            .checked_mul(core::mem::size_of::<T>())
+            .ok_or(BuildError::OutOfMemory {
+                what,
+                bytes: usize::MAX,
+            })?;
+        self.charge(bytes, what)?;
+        BigVec::with_capacity(len).ok_or_else(|| {
+            self.release(bytes);
+            BuildError::OutOfMemory { what, bytes }
+        })
+    }
+
+    /// A [`BigVec`] of `len` copies of `value`, charged to the budget.
+    pub fn big_filled<T: Copy>(
+        &mut self,
+        len: usize,
+        value: T,
+        what: &'static str,
+    ) -> Result<BigVec<T>, BuildError> {
+        let mut v = self.big_vec(len, what)?;
+        v.fill_to_capacity(value);
+        Ok(v)
+    }
+
+    /// Releases a [`BigVec`] charged with [`MemoryBudget::big_vec`] and drops it.
+    pub fn free_big<T: Copy>(&mut self, v: BigVec<T>) {
+        self.release(v.bytes());
+    }
+
     /// Releases a temporary vector charged with [`MemoryBudget::vec`] and drops it.
     pub fn free<T>(&mut self, v: Vec<T>) {
         self.release(v.capacity() * core::mem::size_of::<T>());
@@ -215,23 +253,30 @@ impl MemoryBudget {
 }
 
 /// Asks the kernel to back the whole 2 MiB pages inside `v`'s new, untouched allocation with
-/// transparent huge pages, if it holds any (Linux with `std`; elsewhere nothing). A build writes
-/// each byte of its large arrays once, right after taking them, so their first touch is much of a
-/// build's time: on the project's VM a fresh 4 KiB page costs about 2 µs (0.55 ns a byte, against
-/// 0.12 ns a byte with the hint; docs/performance.md). Embree gives its large blocks the same hint.
-/// Only advice: a kernel that refuses it changes nothing.
+/// transparent huge pages, if it holds any (see [`advise_huge_pages`]).
 #[inline]
 fn hint_huge_pages<T>(v: &mut Vec<T>) {
+    let bytes = v.capacity().saturating_mul(core::mem::size_of::<T>());
+    advise_huge_pages(v.as_mut_ptr() as usize, bytes);
+}
+
+/// Asks the kernel to back the whole 2 MiB pages inside the block of `bytes` at `start` (an
+/// allocation the caller owns and has not touched yet) with transparent huge pages (Linux with
+/// `std`; elsewhere nothing). A build writes each byte of its large arrays once, right after taking
+/// them, so their first touch is much of a build's time: on the project's VMs a fresh 4 KiB page
+/// costs about 2 µs (0.55–0.59 ns a byte, against 0.10–0.12 ns a byte with the hint;
+/// docs/performance.md, stops 19 and 46). Embree gives its large blocks the same hint. Only
+/// advice: a kernel that refuses it changes nothing.
+#[inline]
+pub(crate) fn advise_huge_pages(start: usize, bytes: usize) {
     #[cfg(all(feature = "std", target_os = "linux"))]
     {
-        const HUGE: usize = 2 << 20;
-        let bytes = v.capacity().saturating_mul(core::mem::size_of::<T>());
-        if bytes >= HUGE {
-            let start = v.as_mut_ptr() as usize;
-            let lo = start.saturating_add(HUGE - 1) & !(HUGE - 1);
-            let hi = start.saturating_add(bytes) & !(HUGE - 1);
+        use crate::bigvec::HUGE_PAGE;
+        if bytes >= HUGE_PAGE {
+            let lo = start.saturating_add(HUGE_PAGE - 1) & !(HUGE_PAGE - 1);
+            let hi = start.saturating_add(bytes) & !(HUGE_PAGE - 1);
             if hi > lo {
-                // SAFETY: [lo, hi) lies inside the allocation `v` owns; MADV_HUGEPAGE changes only
+                // SAFETY: [lo, hi) lies inside the caller's allocation; MADV_HUGEPAGE changes only
                 // how the kernel backs those pages, never their contents or their validity.
                 unsafe {
                     libc::madvise(lo as *mut c_void, hi - lo, libc::MADV_HUGEPAGE);
@@ -240,7 +285,7 @@ fn hint_huge_pages<T>(v: &mut Vec<T>) {
         }
     }
     #[cfg(not(all(feature = "std", target_os = "linux")))]
-    let _ = v;
+    let _ = (start, bytes);
 }
 
 /// Bytes a vector holds (its capacity), for memory reports.

@@ -24,6 +24,7 @@ extern crate alloc;
 extern crate std;
 
 pub mod accel;
+pub mod bigvec;
 pub mod budget;
 pub mod error;
 pub mod geometry;

@@ -3,6 +3,7 @@
 use alloc::vec::Vec;
 use glam::{Vec3, Vec3A};
 
+use crate::bigvec::BigVec;
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::{BuildError, MeshError};
 use crate::ray::Aabb;
@@ -23,14 +24,14 @@ use crate::ray::Aabb;
 /// Functions that receive a `TriMesh` do not check these again.
 #[derive(Debug)]
 pub struct TriMesh {
-    tris: Vec<[Vec3; 3]>,
+    tris: BigVec<[Vec3; 3]>,
     /// Bit `i % 32` of word `i / 32` is set when triangle `i` is degenerate (decided once, here, so
     /// that structures and queries never recompute it).
     degenerate_bits: Vec<u32>,
     bounds: Aabb,
     degenerate: usize,
     /// Each triangle's vertex indices, within its geometry.
-    indices: Vec<[u32; 3]>,
+    indices: BigVec<[u32; 3]>,
     /// Per geometry, its first triangle; then the triangle count (`geometries + 1` entries).
     starts: Vec<u32>,
     /// Per geometry, its vertex count.
@@ -62,8 +63,8 @@ pub trait MeshSource {
     /// triangles: the mesh is dropped). Provided (one call per geometry, the accessors inlined).
     fn copy_triangles(
         &self,
-        tris: &mut Vec<[Vec3; 3]>,
-        indices: &mut Vec<[u32; 3]>,
+        tris: &mut BigVec<[Vec3; 3]>,
+        indices: &mut BigVec<[u32; 3]>,
         classified: &mut Classified<'_>,
     ) -> Result<(), MeshError> {
         let (n, nv) = (self.triangle_count(), self.vertex_count());
@@ -250,18 +251,18 @@ impl TriMesh {
             }
         }
         let mut mesh = TriMesh {
-            tris: Vec::new(),
+            tris: BigVec::new(),
             degenerate_bits: Vec::new(),
             bounds: Aabb::EMPTY,
             degenerate: 0,
-            indices: Vec::new(),
+            indices: BigVec::new(),
             starts: Vec::new(),
             vertex_counts: Vec::new(),
         };
         let allocated = (|| {
-            mesh.tris = budget.vec(n, "mesh triangles")?;
+            mesh.tris = budget.big_vec(n, "mesh triangles")?;
             mesh.degenerate_bits = budget.filled(n.div_ceil(32), 0u32, "mesh degenerate flags")?;
-            mesh.indices = budget.vec(n, "mesh indices")?;
+            mesh.indices = budget.big_vec(n, "mesh indices")?;
             mesh.starts = budget.vec(sources.len() + 1, "mesh geometries")?;
             mesh.vertex_counts = budget.vec(sources.len(), "mesh geometries")?;
             Ok::<(), BuildError>(())
@@ -442,18 +443,18 @@ impl TriMesh {
 
     /// Bytes this mesh holds.
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.tris)
+        self.tris.bytes()
             + bytes_of(&self.degenerate_bits)
-            + bytes_of(&self.indices)
+            + self.indices.bytes()
             + bytes_of(&self.starts)
             + bytes_of(&self.vertex_counts)
     }
 
     /// Gives the copy's bytes back to the budget it was charged to and drops it.
     pub fn release(self, budget: &mut MemoryBudget) {
-        budget.free(self.tris);
+        budget.free_big(self.tris);
         budget.free(self.degenerate_bits);
-        budget.free(self.indices);
+        budget.free_big(self.indices);
         budget.free(self.starts);
         budget.free(self.vertex_counts);
     }

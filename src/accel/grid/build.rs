@@ -8,6 +8,7 @@ use alloc::vec::Vec;
 use super::layout::Shape;
 use super::voxel::{Cells, Overlap};
 use super::{GridParams, Lists};
+use crate::bigvec::BigVec;
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
@@ -518,12 +519,12 @@ fn fill_lists(
     }
     let blocks = total / 4;
     // Every lane starts unused, so the gap lanes at the end of each list need no pass of their own.
-    let mut ids = budget.filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
+    let mut ids = budget.big_filled(blocks, [Hit::INVALID_ID; 4], "grid references")?;
     scatter_ids(kept, counts, ids.as_flattened_mut());
     match gather_blocks(mesh, &ids, budget) {
         Ok(tris) => Ok(Lists::Packed { ids, tris }),
         Err(e) => {
-            budget.free(ids);
+            budget.free_big(ids);
             Err(e)
         }
     }
@@ -535,10 +536,11 @@ pub(super) fn gather_blocks(
     mesh: &TriMesh,
     ids: &[[u32; 4]],
     budget: &mut MemoryBudget,
-) -> Result<Vec<Block4>, BuildError> {
-    let mut tris = budget.vec::<Block4>(ids.len(), "triangle packs")?;
+) -> Result<BigVec<Block4>, BuildError> {
+    let mut tris = budget.big_vec::<Block4>(ids.len(), "triangle packs")?;
     let all = mesh.triangles();
-    tris.extend(ids.iter().map(|&four| Block4::gather(all, four)));
+    let written = tris.extend_within(ids.iter().map(|&four| Block4::gather(all, four)));
+    debug_assert_eq!(written, ids.len());
     Ok(tris)
 }
 

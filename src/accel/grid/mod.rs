@@ -7,6 +7,7 @@ use alloc::vec::Vec;
 use crate::accel::{
     run_clipped_query, test_blocks, test_refs, Aabb, AcceptingQuery, Mailbox, RayQuery, Refs,
 };
+use crate::bigvec::BigVec;
 use crate::budget::{bytes_of, MemoryBudget};
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
@@ -82,8 +83,8 @@ enum Lists {
     /// Block-aligned lists: block `b` holds the triangles `ids[b]` (gap lanes `Hit::INVALID_ID`
     /// and NaN); offsets count blocks.
     Packed {
-        ids: Vec<[u32; 4]>,
-        tris: Vec<Block4>,
+        ids: BigVec<[u32; 4]>,
+        tris: BigVec<Block4>,
     },
     /// Ids only, unaligned; offsets count ids; the test gathers from the mesh (`packs` is empty).
     Indexed { ids: Vec<u32>, packs: TrianglePacks },
@@ -155,8 +156,8 @@ impl UniformGrid {
         if live == 0 || tight.is_empty() {
             let lists = match params.layout {
                 TriangleLayout::Packed => Lists::Packed {
-                    ids: Vec::new(),
-                    tris: Vec::new(),
+                    ids: BigVec::new(),
+                    tris: BigVec::new(),
                 },
                 TriangleLayout::Indexed => Lists::Indexed {
                     ids: Vec::new(),
@@ -275,10 +276,10 @@ impl UniformGrid {
             + self
                 .nested
                 .iter()
-                .map(|n| n.grid.memory_bytes() + bytes_of(&n.large_ids) + bytes_of(&n.large))
+                .map(|n| n.grid.memory_bytes() + n.large_ids.bytes() + n.large.bytes())
                 .sum::<usize>()
             + match &self.lists {
-                Lists::Packed { ids, tris } => bytes_of(ids) + bytes_of(tris),
+                Lists::Packed { ids, tris } => ids.bytes() + tris.bytes(),
                 Lists::Indexed { ids, packs } => bytes_of(ids) + packs.memory_bytes(),
             }
     }
@@ -286,10 +287,10 @@ impl UniformGrid {
     /// Bytes of the triangle packs alone (zero for the indexed layout).
     pub fn pack_bytes(&self) -> usize {
         let own = match &self.lists {
-            Lists::Packed { tris, .. } => bytes_of(tris),
+            Lists::Packed { tris, .. } => tris.bytes(),
             Lists::Indexed { packs, .. } => packs.memory_bytes(),
         };
-        let nested = |n: &Nested| n.grid.pack_bytes() + bytes_of(&n.large);
+        let nested = |n: &Nested| n.grid.pack_bytes() + n.large.bytes();
         own + self.nested.iter().map(nested).sum::<usize>()
     }
 
@@ -310,8 +311,8 @@ impl UniformGrid {
         self.blocks.release(budget);
         match self.lists {
             Lists::Packed { ids, tris } => {
-                budget.free(ids);
-                budget.free(tris);
+                budget.free_big(ids);
+                budget.free_big(tris);
             }
             Lists::Indexed { ids, packs } => {
                 budget.free(ids);

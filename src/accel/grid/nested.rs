@@ -6,11 +6,10 @@
 
 use glam::Vec3;
 
-use alloc::vec::Vec;
-
 use super::build::{gather_blocks, Members};
 use super::layout::Shape;
 use super::{GridParams, Lists, UniformGrid};
+use crate::bigvec::BigVec;
 use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
@@ -44,9 +43,9 @@ pub(super) struct Nested {
     /// The cell's large triangles, wider on some axis than the cell or eight cells of a grid over
     /// it (`LARGE_CELLS`; a stadium's field around its teapot), tested whole on entering it, four
     /// to a block (ids, gap lanes `Hit::INVALID_ID`)...
-    pub large_ids: Vec<[u32; 4]>,
+    pub large_ids: BigVec<[u32; 4]>,
     /// ...and their triangles (gap lanes NaN).
-    pub large: Vec<Block4>,
+    pub large: BigVec<Block4>,
     /// How many large triangles there are (padding excluded).
     pub large_count: u32,
 }
@@ -55,8 +54,8 @@ impl Nested {
     /// Gives the nested grid's and the large triangles' bytes back to `budget` and drops them.
     pub fn release(self, budget: &mut MemoryBudget) {
         self.grid.release(budget);
-        budget.free(self.large_ids);
-        budget.free(self.large);
+        budget.free_big(self.large_ids);
+        budget.free_big(self.large);
     }
 }
 
@@ -330,7 +329,7 @@ fn nest_small(
         return Ok(None);
     }
     let blocks = large_list.len().div_ceil(4);
-    let mut large_ids = match budget.filled(blocks, [Hit::INVALID_ID; 4], "nested grid ids") {
+    let mut large_ids = match budget.big_filled(blocks, [Hit::INVALID_ID; 4], "nested grid ids") {
         Ok(v) => v,
         Err(e) => {
             sub.release(budget);
@@ -344,7 +343,7 @@ fn nest_small(
         Ok(v) => v,
         Err(e) => {
             sub.release(budget);
-            budget.free(large_ids);
+            budget.free_big(large_ids);
             return Err(e);
         }
     };
@@ -429,7 +428,7 @@ impl UniformGrid {
     }
 
     /// The cells with a nested grid.
-    pub(super) fn nested_cells(&self) -> Vec<usize> {
+    pub(super) fn nested_cells(&self) -> alloc::vec::Vec<usize> {
         self.nested.iter().map(|n| n.cell).collect()
     }
 }
