@@ -8,7 +8,9 @@
 //! large blocks do not start on a 2 MiB boundary, so a few-megabyte `Vec` gets one huge page or
 //! none. A [`BigVec`] of at least [`HUGE_PAGE`] bytes is allocated 2 MiB-aligned and advised whole
 //! (`budget::advise_huge_pages`). A `Vec` cannot hold such a block: it frees with its element's
-//! alignment, and the allocator must be given back the layout it was asked for.
+//! alignment, and the allocator must be given back the layout it was asked for. The budget charges
+//! a block's own bytes, not the alignment's slack an allocator may map around it (untouched address
+//! space with glibc).
 
 use core::alloc::Layout;
 use core::mem::{size_of, MaybeUninit};
@@ -73,10 +75,8 @@ impl<T: Copy> BigVec<T> {
     /// the allocator refuses (never aborts).
     pub fn with_capacity(cap: usize) -> Option<Self> {
         if cap == 0 || size_of::<T>() == 0 {
-            return Some(BigVec {
-                cap: if size_of::<T>() == 0 { usize::MAX } else { 0 },
-                ..Self::new()
-            });
+            // No block: `layout` is None for zero bytes, so Drop frees nothing.
+            return Some(BigVec { cap, ..Self::new() });
         }
         let layout = Self::layout(cap)?;
         // SAFETY: the layout has a non-zero size (`layout` returns None otherwise).
@@ -217,6 +217,9 @@ mod tests {
         assert!(big.spare_capacity_mut().is_empty());
         let empty = BigVec::<u64>::with_capacity(0).unwrap();
         assert!(empty.is_empty() && empty.bytes() == 0);
+        let mut units = BigVec::<()>::with_capacity(3).unwrap();
+        units.fill_to_capacity(());
+        assert_eq!((units.len(), units.capacity(), units.bytes()), (3, 3, 0));
         assert!(BigVec::<u64>::with_capacity(usize::MAX).is_none());
     }
 

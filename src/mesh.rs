@@ -273,16 +273,28 @@ impl TriMesh {
         }
         let mut classified = Classified::new(&mut mesh.degenerate_bits);
         for (g, src) in sources.iter().enumerate() {
+            let start = mesh.tris.len();
             let copied = match src.first_non_finite_vertex() {
                 Some(vertex) => Err(MeshError::NonFiniteVertex { vertex }),
                 None => src.copy_triangles(&mut mesh.tris, &mut mesh.indices, &mut classified),
             };
+            // `copy_triangles` may be overridden: one that copies another count than the source
+            // says is refused, as the triangles and indices must stay in step.
+            let end = start.saturating_add(src.triangle_count());
+            let copied = copied.and_then(|()| {
+                if mesh.tris.len() == end && mesh.indices.len() == end {
+                    Ok(())
+                } else {
+                    Err(MeshError::MissingData {
+                        what: "copied triangles",
+                    })
+                }
+            });
             if let Err(error) = copied {
                 mesh.release(budget);
                 return Err(BuildError::InvalidGeometry { geometry: g, error });
             }
-            mesh.starts
-                .push((mesh.tris.len() - src.triangle_count()) as u32);
+            mesh.starts.push(start as u32);
             mesh.vertex_counts.push(src.vertex_count());
         }
         mesh.starts.push(mesh.tris.len() as u32);
@@ -563,5 +575,51 @@ mod tests {
         assert_eq!(mesh.degenerate_count(), before - 10 + 16);
         assert!(mesh.is_degenerate(63) && !mesh.is_degenerate(62));
         assert!(mesh.bounds().min.x < -1.0 && mesh.bounds().max.x > 2.0);
+    }
+
+    /// A source whose `copy_triangles` override copies fewer triangles than it counts is refused
+    /// (the triangles and their indices must stay in step), and the budget gets everything back.
+    #[test]
+    fn a_source_that_copies_too_few_triangles_is_refused() {
+        struct Short<'a>(IndexedMesh<'a>);
+        impl MeshSource for Short<'_> {
+            fn vertex_count(&self) -> usize {
+                self.0.vertex_count()
+            }
+            fn triangle_count(&self) -> usize {
+                self.0.triangle_count()
+            }
+            fn vertex(&self, i: usize) -> [f32; 3] {
+                self.0.vertex(i)
+            }
+            fn triangle(&self, i: usize) -> [u32; 3] {
+                self.0.triangle(i)
+            }
+            fn copy_triangles(
+                &self,
+                _tris: &mut BigVec<[Vec3; 3]>,
+                _indices: &mut BigVec<[u32; 3]>,
+                _classified: &mut Classified<'_>,
+            ) -> Result<(), MeshError> {
+                Ok(())
+            }
+        }
+        let data = part(4, &mut SplitMix64::new(9));
+        let whole = IndexedMesh {
+            vertices: &data.vertices,
+            indices: &data.indices,
+        };
+        let mut budget = MemoryBudget::new(0);
+        assert!(TriMesh::from_sources(&[&whole], &mut budget).is_ok());
+        let mut budget = MemoryBudget::new(0);
+        let refused = TriMesh::from_sources(&[&whole, &Short(whole)], &mut budget);
+        assert!(matches!(
+            refused,
+            Err(BuildError::InvalidGeometry {
+                geometry: 1,
+                error: MeshError::MissingData { .. }
+            })
+        ));
+        assert_eq!(budget.used(), 0);
     }
 }
