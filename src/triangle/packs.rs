@@ -1,10 +1,9 @@
 //! The triangles of a structure's reference list, four to a [`Block4`] in the list's order, so that
 //! the hot loop reads them without going through the mesh.
 
-use alloc::vec::Vec;
-
 use super::Block4;
-use crate::budget::{bytes_of, MemoryBudget};
+use crate::bigvec::BigVec;
+use crate::budget::MemoryBudget;
 use crate::error::BuildError;
 use crate::mesh::TriMesh;
 use crate::ray::Hit;
@@ -29,7 +28,8 @@ pub enum TriangleLayout {
 /// `ceil(refs.len() / 4)` blocks.
 #[derive(Debug, Default)]
 pub struct TrianglePacks {
-    blocks: Vec<Block4>,
+    /// On a huge page when large (see [`BigVec`]): a build writes it once, right after taking it.
+    blocks: BigVec<Block4>,
 }
 
 impl TrianglePacks {
@@ -43,11 +43,12 @@ impl TrianglePacks {
         if layout == TriangleLayout::Indexed || refs.is_empty() {
             return Ok(TrianglePacks::default());
         }
-        let mut blocks = budget.vec::<Block4>(refs.len().div_ceil(4), "triangle packs")?;
-        for chunk in refs.chunks(4) {
+        let mut blocks = budget.big_vec::<Block4>(refs.len().div_ceil(4), "triangle packs")?;
+        let written = blocks.extend_within(refs.chunks(4).map(|chunk| {
             let ids = core::array::from_fn(|lane| chunk.get(lane).map_or(Hit::INVALID_ID, |&p| p));
-            blocks.push(Block4::gather(mesh.triangles(), ids));
-        }
+            Block4::gather(mesh.triangles(), ids)
+        }));
+        debug_assert_eq!(written, refs.len().div_ceil(4));
         Ok(TrianglePacks { blocks })
     }
 
@@ -71,11 +72,11 @@ impl TrianglePacks {
 
     /// Bytes held.
     pub fn memory_bytes(&self) -> usize {
-        bytes_of(&self.blocks)
+        self.blocks.bytes()
     }
 
     /// Gives the bytes back to the budget they were charged to.
     pub fn release(self, budget: &mut MemoryBudget) {
-        budget.free(self.blocks);
+        budget.free_big(self.blocks);
     }
 }
