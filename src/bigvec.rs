@@ -241,4 +241,21 @@ mod tests {
         budget.free_big(v);
         assert_eq!(budget.used(), 0);
     }
+
+    /// Growing keeps the elements and the budget's count: the new block's bytes replace the old.
+    #[test]
+    fn a_big_vec_grows_keeping_its_elements() {
+        let mut budget = crate::budget::MemoryBudget::new(0);
+        let mut v = budget.big_vec::<u32>(3, "test").unwrap();
+        v.extend_within([7, 8, 9]);
+        let n = HUGE_PAGE / 4 + 1;
+        budget.reserve_big(&mut v, n, "test").unwrap();
+        assert_eq!((v.len(), v.capacity()), (3, n));
+        assert_eq!(&v[..], &[7, 8, 9]);
+        assert_eq!(budget.used(), v.bytes());
+        budget.reserve_big(&mut v, 2, "test").unwrap();
+        assert_eq!(v.capacity(), n, "never shrinks");
+        budget.free_big(v);
+        assert_eq!(budget.used(), 0);
+    }
 }

@@ -241,6 +241,26 @@ impl MemoryBudget {
         Ok(v)
     }
 
+    /// Makes `v`'s capacity at least `cap` elements (exactly `cap` if it grows), keeping its
+    /// contents: a new block charged first, the elements copied, the old block released. Both
+    /// blocks are held while the elements move, as a reallocation may hold them.
+    pub fn reserve_big<T: Copy>(
+        &mut self,
+        v: &mut BigVec<T>,
+        cap: usize,
+        what: &'static str,
+    ) -> Result<(), BuildError> {
+        if cap <= v.capacity() {
+            return Ok(());
+        }
+        let mut bigger = self.big_vec::<T>(cap, what)?;
+        let copied = bigger.extend_within(v.iter().copied());
+        debug_assert_eq!(copied, v.len());
+        let old = core::mem::replace(v, bigger);
+        self.free_big(old);
+        Ok(())
+    }
+
     /// Releases a [`BigVec`] charged with [`MemoryBudget::big_vec`] and drops it.
     pub fn free_big<T: Copy>(&mut self, v: BigVec<T>) {
         self.release(v.bytes());

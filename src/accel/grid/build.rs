@@ -111,17 +111,19 @@ pub(super) fn lists(
 }
 
 /// Each member's cells in member order, with the member's id beside each.
+/// Both are written once, in order, right after they are taken: on huge pages when large
+/// ([`BigVec`]).
 struct Kept {
-    cells: Vec<u32>,
+    cells: BigVec<u32>,
     /// The id of the triangle of each kept cell (as long as `cells`): the fill then walks
     /// references, not triangles with a varying number of cells each.
-    prims: Vec<u32>,
+    prims: BigVec<u32>,
 }
 
 impl Kept {
     fn release(self, budget: &mut MemoryBudget) {
-        budget.free(self.cells);
-        budget.free(self.prims);
+        budget.free_big(self.cells);
+        budget.free_big(self.prims);
     }
 
     /// The references both vectors have room for.
@@ -174,8 +176,8 @@ impl Kept {
             doubled
         }
         .max(written.saturating_add(need));
-        budget.reserve_to(&mut self.cells, room, "grid build scratch")?;
-        budget.reserve_to(&mut self.prims, room, "grid build scratch")
+        budget.reserve_big(&mut self.cells, room, "grid build scratch")?;
+        budget.reserve_big(&mut self.prims, room, "grid build scratch")
     }
 }
 
@@ -195,10 +197,10 @@ fn keep_cells(
     // About 2.5 references per triangle on well-shaped scenes; the vectors grow past that (`grow`).
     let guess = n.saturating_mul(3).max(64);
     let mut kept = Kept {
-        cells: budget.vec::<u32>(guess, "grid build scratch")?,
-        prims: Vec::new(),
+        cells: budget.big_vec::<u32>(guess, "grid build scratch")?,
+        prims: BigVec::new(),
     };
-    match budget.vec::<u32>(guess, "grid build scratch") {
+    match budget.big_vec::<u32>(guess, "grid build scratch") {
         Ok(v) => kept.prims = v,
         Err(e) => {
             kept.release(budget);
@@ -482,7 +484,7 @@ fn offsets(counts: &mut [u32], cells: usize, align: u64) -> Result<usize, BuildE
 /// the length of `ids`).
 #[inline(never)]
 fn scatter_ids(kept: &Kept, counts: &mut [u32], ids: &mut [u32]) {
-    for (&cell, &prim) in kept.cells.iter().zip(&kept.prims).rev() {
+    for (&cell, &prim) in kept.cells.iter().zip(kept.prims.iter()).rev() {
         debug_assert!((cell as usize) < counts.len());
         // SAFETY: every kept cell is a cell of the grid (keep_cells), and `counts` has a slot for
         // each.
