@@ -166,9 +166,12 @@ impl Kept {
         // rest needs), and only within the memory limit, which doubling alone might still meet.
         let projected = (written as f64 * total as f64 / done.max(1) as f64 * 1.125) as usize;
         let projected = projected.min(room.saturating_mul(4));
+        // The peak the two growths reach: each new block is taken while its old one is still held
+        // (`reserve_big` copies), so both new blocks and the second old one at once.
+        let u32_bytes = core::mem::size_of::<u32>();
         let extra = projected
-            .saturating_sub(room)
-            .saturating_mul(2 * core::mem::size_of::<u32>());
+            .saturating_mul(2 * u32_bytes)
+            .saturating_sub(room.saturating_mul(u32_bytes));
         let fits = budget.limit() == 0 || budget.used().saturating_add(extra) <= budget.limit();
         let room = if fits {
             doubled.max(projected)
@@ -176,6 +179,8 @@ impl Kept {
             doubled
         }
         .max(written.saturating_add(need));
+        // Should the second growth be refused, the first keeps its larger block until the build
+        // releases both (`room` stays the smaller capacity, so nothing is written past it).
         budget.reserve_big(&mut self.cells, room, "grid build scratch")?;
         budget.reserve_big(&mut self.prims, room, "grid build scratch")
     }
