@@ -611,13 +611,24 @@ fn built_lists_are_the_voxelization() {
     }
 }
 
-/// Memory limits through the build's growth paths (scenes of 9–30 references a triangle, past the
-/// scratch's first guess of 3, so both the small and the large footprints' growth run): each build
-/// either fits, with the unlimited build's lists, or fails with every byte given back.
+/// Memory limits through the build's growth paths: each build either fits, with the unlimited
+/// build's lists, or fails with every byte given back. The first scene (9–30 references a
+/// triangle, past the scratch's first guess of 3) grows it on large footprints; the second, long
+/// hairs that fill the guess and then small triangles, grows it on small ones (at density 32: seen
+/// with a count in the small footprints' growth, 1 480 triangles growing at 4 433 references).
 #[test]
 fn a_build_under_any_memory_limit_is_whole_or_nothing() {
-    let mut data = procedural::random_soup(400, 11, 0.4);
-    data.append(&procedural::hair(30, 4, 5));
+    let mut long = procedural::random_soup(400, 11, 0.4);
+    long.append(&procedural::hair(30, 4, 5));
+    whole_or_nothing_under_limits(&long);
+    let mut small_last = procedural::hair(60, 4, 5);
+    small_last.append(&procedural::random_soup(1000, 12, 0.005));
+    whole_or_nothing_under_limits(&small_last);
+}
+
+/// [`a_build_under_any_memory_limit_is_whole_or_nothing`] on one scene, both layouts, densities 2
+/// and 32.
+fn whole_or_nothing_under_limits(data: &MeshData) {
     let mut unlimited = MemoryBudget::new(0);
     let mesh = TriMesh::from_source(&data.as_source(), &mut unlimited).unwrap();
     let base = unlimited.used();
