@@ -209,19 +209,22 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let far = near ^ 1;
                 let go_near = bits & ax.near_empty == 0 && near_t1 >= t0;
                 let go_far = bits & (ax.near_empty ^ BOTH_EMPTY) == 0 && far_t0 <= t1;
+                // The far child is written whether or not it is pushed, and `sp` moves by a
+                // flag: whether a ray crosses the split inside its interval is what a predictor
+                // cannot learn, so a branch on it mispredicts about half the time. Whether it
+                // enters the near child at all is a branch (usually true, and a select there
+                // would make the next node's load wait for the float compares).
+                // `sp` never exceeds the current node's depth (one entry per ancestor at most), and
+                // an interior node's depth is below MAX_DEPTH < STACK_SIZE: the slot exists.
+                debug_assert!(sp < STACK_SIZE);
+                // SAFETY: as just said, `sp < STACK_SIZE`.
+                unsafe { stack.get_unchecked_mut(sp) }.write(Pending {
+                    node: far,
+                    t0: far_t0,
+                    t1,
+                });
                 if go_near {
-                    if go_far {
-                        // The depth bound (≤ MAX_DEPTH < STACK_SIZE) leaves room: one entry per level.
-                        debug_assert!(sp < STACK_SIZE);
-                        if let Some(slot) = stack.get_mut(sp) {
-                            slot.write(Pending {
-                                node: far,
-                                t0: far_t0,
-                                t1,
-                            });
-                            sp += 1;
-                        }
-                    }
+                    sp += go_far as usize;
                     index = near;
                     t1 = near_t1;
                     continue;
