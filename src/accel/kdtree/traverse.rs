@@ -208,12 +208,13 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
                 let near = node.children() + ((down >> node.axis()) & 1);
                 let far = near ^ 1;
                 let go_near = bits & ax.near_empty == 0 && near_t1 >= t0;
-                let go_far = bits & (ax.near_empty ^ BOTH_EMPTY) == 0 && far_t0 <= t1;
+                let go_far = (bits & (ax.near_empty ^ BOTH_EMPTY) == 0) & (far_t0 <= t1);
                 // The far child is written whether or not it is pushed, and `sp` moves by a
                 // flag: whether a ray crosses the split inside its interval is what a predictor
-                // cannot learn, so a branch on it mispredicts about half the time. Whether it
-                // enters the near child at all is a branch (usually true, and a select there
-                // would make the next node's load wait for the float compares).
+                // cannot learn, so a branch on it mispredicts about half the time (hence `&`, not
+                // `&&`, in `go_far`: a short circuit is a branch too). Whether it enters the near
+                // child at all is a branch: a select there would make the next node's load wait
+                // for the float compares.
                 // `sp` never exceeds the current node's depth (one entry per ancestor at most), and
                 // an interior node's depth is below MAX_DEPTH < STACK_SIZE: the slot exists.
                 debug_assert!(sp < STACK_SIZE);
