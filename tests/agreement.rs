@@ -222,3 +222,53 @@ fn counted_queries_return_the_same_hits_and_count_the_work() {
     }
     assert!(kd_total > 0 && grid_total > 0);
 }
+
+/// Triangles that shrink towards the origin by a quarter per layer on all three axes: every split
+/// cuts off one layer, so a kd-tree that splits as long as it may runs down to its depth limit,
+/// and rays towards and out of the origin cross every level. The walk's stack, which holds one pending subtree per level, is
+/// then used to its bound (`MAX_DEPTH`): the answers must still be the brute force's (and, in a
+/// debug build, the walk's stack assertions hold).
+#[test]
+fn trees_at_the_depth_limit_agree() {
+    let mut data = MeshData::default();
+    for layer in 0..220 {
+        let s = 0.75f32.powi(layer);
+        for a in 0..3 {
+            let b = data.vertices.len() as u32;
+            for k in 0..3 {
+                let mut p = [0.0f32; 3];
+                p[a] = s;
+                p[(a + 1) % 3] = s * (0.1 + 0.05 * k as f32);
+                p[(a + 2) % 3] = s * if k == 2 { 0.17 } else { 0.1 };
+                data.vertices.push(p);
+            }
+            data.indices.push([b, b + 1, b + 2]);
+        }
+    }
+    let mesh = mesh_of(&data);
+    let mut rays = test_rays(&mesh, 16, 500, 7);
+    let mut rng = rayq::workload::SplitMix64::new(3);
+    for _ in 0..1500 {
+        let d = glam::Vec3::new(rng.next_f32(), rng.next_f32(), rng.next_f32())
+            + glam::Vec3::splat(1e-3);
+        rays.push(rayq::Ray::new(d * (1.0 + 2.0 * rng.next_f32()), -d));
+        rays.push(rayq::Ray::new(glam::Vec3::splat(1e-30 * rng.next_f32()), d));
+    }
+    let want = reference_hits(&mesh, &rays);
+    let deepest = KdTreeParams {
+        intersection_cost: 80.0,
+        max_leaf_prims: 0,
+        max_depth: u32::MAX,
+        ..KdTreeParams::DEFAULT
+    };
+    let default = KdTree::build(&mesh, &KdTreeParams::DEFAULT, &mut MemoryBudget::new(0)).unwrap();
+    let deep = KdTree::build(&mesh, &deepest, &mut MemoryBudget::new(0)).unwrap();
+    assert_eq!(
+        deep.depth(),
+        rayq::accel::kdtree::MAX_DEPTH,
+        "the scene should take the deepest tree to the depth limit"
+    );
+    for (name, tree) in [("kd-default", &default), ("kd-deepest", &deep)] {
+        assert_agrees(name, &mesh, tree, &rays, &want);
+    }
+}

@@ -178,8 +178,9 @@ impl<const COUNT: bool, const ANY: bool> TriangleLoop for Walk<'_, COUNT, ANY> {
             mut t1,
         } = clip;
         let nodes = &tree.nodes[..];
-        // Entries are written before they are read (`sp` counts the written ones), so the array
-        // needs no initialisation.
+        // Entries are written before they are read (the entries below `sp` are the pushed ones,
+        // each written; the slot at `sp` may hold a write that was not pushed), so the array needs
+        // no initialisation.
         let mut stack = [core::mem::MaybeUninit::<Pending>::uninit(); STACK_SIZE];
         let mut sp = 0usize;
         let mut index = 0u32;
