@@ -280,9 +280,23 @@ impl Axes {
         t_stop: f32,
     ) -> Option<u32> {
         let (blocks, res) = (&grid.blocks, grid.shape.res);
-        // The next block face per axis, and its t (∞ on a non-moving axis, whose k is k_end).
+        // The block face after `face` on moving axis `a` (past the box's face when `face` is it:
+        // a plane no walk crosses, whose t is finite and never read).
+        let beyond = |a: usize, face: u32| {
+            if self.up(a) {
+                (face + BLOCK).min(res[a])
+            } else {
+                face.wrapping_sub(BLOCK)
+            }
+        };
+        // The next block face per axis and its t (∞ on a non-moving axis, whose k is k_end), and
+        // the t of the face after it: a step moves that into place and makes the next one off the
+        // chain from one step's choice of axis to the next (as the cell walk's `t_after`). The
+        // three next t are kept in registers, not in an array indexed by the axis, whose store
+        // and reload were on that chain too.
         let mut face = self.k_end;
         let mut t = [f32::INFINITY; 4];
+        let mut t_beyond = [f32::INFINITY; 4];
         for a in 0..3 {
             if self.moves(a) {
                 let c = self.coordinate(a) / BLOCK * BLOCK;
@@ -296,26 +310,30 @@ impl Axes {
                 } else {
                     self.plane_t(a, face[a])
                 };
+                t_beyond[a] = self.plane_t(a, beyond(a, face[a]));
             }
         }
+        let (mut tx, mut ty, mut tz) = (t[0], t[1], t[2]);
         let mut steps = 0;
         loop {
-            let (tx, ty, tz) = (t[0], t[1], t[2]);
             let not_x = !((tx <= ty) & (tx <= tz));
             let axis = (usize::from(not_x) * (1 + usize::from(!(ty <= tz)))) & 3;
-            let t_axis = t[axis];
+            // The chosen axis's t is the least of the three (none is NaN).
+            let t_axis = lesser(tx, lesser(ty, tz));
             if t_axis >= t_stop || face[axis] == self.k_end[axis] {
                 return None;
             }
             steps += 1;
             *block = block.wrapping_add(self.block_delta[axis]);
             let crossed = face[axis];
-            face[axis] = if self.up(axis) {
-                (crossed + BLOCK).min(res[axis])
-            } else {
-                crossed - BLOCK
-            };
-            t[axis] = self.plane_t(axis, face[axis]);
+            let next = beyond(axis, crossed);
+            face[axis] = next;
+            let t_next = t_beyond[axis];
+            debug_assert_eq!(t_next.to_bits(), self.plane_t(axis, next).to_bits());
+            tx = if axis == 0 { t_next } else { tx };
+            ty = if axis == 1 { t_next } else { ty };
+            tz = if axis == 2 { t_next } else { tz };
+            t_beyond[axis] = self.plane_t(axis, beyond(axis, next));
             debug_assert!(*block < blocks.res.iter().map(|&r| r as usize).product::<usize>());
             if !blocks.occupied(*block) {
                 continue;
