@@ -573,10 +573,11 @@ struct Builder<'a> {
     nodes: Vec<KdNode>,
     prims: Vec<u32>,
     /// Per depth, the items of the two children of the node being split at the depth above:
-    /// a node reads its items from `levels[depth][side]` and writes its children's into
-    /// `levels[depth + 1]`. The upper child's items wait there while the lower child's subtree is
-    /// built (its nodes only write deeper levels), so every item is written once per level and
-    /// never moved.
+    /// a node at depth `d` reads its items from a slot `levels[level][side]` (`level ≤ d`) and
+    /// writes its children's into `levels[d + 1]`. The upper child's items wait there while the
+    /// lower child's subtree is built (its nodes only write deeper levels), so every item is
+    /// written once per level and never moved. A split that sends every item to one side hands
+    /// that child the node's own slot (see [`Builder::partition`]).
     levels: Vec<[Vec<Item>; 2]>,
     /// One axis's events of a node that is split by the exact sweep.
     events: Vec<Event>,
@@ -648,7 +649,7 @@ pub(super) fn build(
             b.budget
                 .push(&mut b.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         }
-        b.node(0, 0, LOWER, root, refs_allowed.max(live), 0, false)
+        b.node(0, 0, (0, LOWER), root, refs_allowed.max(live), 0, false)
     });
     let Builder {
         budget,
@@ -723,16 +724,16 @@ impl Builder<'_> {
         Ok(())
     }
 
-    /// The items of the node at `depth` on `side`.
+    /// The items in the slot `levels[level][side]`.
     #[inline]
-    fn items(&self, depth: u32, side: usize) -> &[Item] {
+    fn items(&self, level: u32, side: usize) -> &[Item] {
         self.levels
-            .get(depth as usize)
+            .get(level as usize)
             .map_or(&[][..], |l| &l[side & 1][..])
     }
 
-    /// Builds the subtree of the node whose items are `levels[depth][side]` into node `index` (already
-    /// in the array), in `bbox`, allowed `refs_allowed` references, with `bad` bad refines above
+    /// Builds the subtree of the node at `depth` whose items are in the slot `levels[level][side]`
+    /// (`slot = (level, side)`) into node `index` (already in the array), in `bbox`, allowed `refs_allowed` references, with `bad` bad refines above
     /// it; returns its SAH cost. `reuse_bins`: the last binned node's bins are this node's (see
     /// [`Builder::binned_split`]).
     #[allow(clippy::too_many_arguments)]
@@ -740,13 +741,13 @@ impl Builder<'_> {
         &mut self,
         index: usize,
         depth: u32,
-        side: usize,
+        (level, side): (u32, usize),
         bbox: Aabb,
         refs_allowed: usize,
         mut bad: u32,
         reuse_bins: bool,
     ) -> Result<f64, Stop> {
-        let n = self.items(depth, side).len();
+        let n = self.items(level, side).len();
         self.work = self.work.saturating_add(n as u64);
         if self.work > self.work_limit {
             return Err(Stop::OverWork);
@@ -764,26 +765,26 @@ impl Builder<'_> {
         let split = if depth >= limit || n <= self.params.max_leaf_prims as usize {
             None
         } else if binned {
-            self.binned_split(depth, side, &bbox, reuse_bins)
+            self.binned_split(level, side, &bbox, reuse_bins)
         } else {
-            self.exact_split(depth, side, &bbox)?
+            self.exact_split(level, side, &bbox)?
         };
         let Some(split) = split else {
-            return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
+            return Ok(self.leaf(index, level, side).map(|()| leaf_cost)?);
         };
         if !(split.cost < leaf_cost) {
             if bad >= MAX_BAD_REFINES
                 || n <= NO_BAD_REFINE
                 || (n <= SMALL_NODE && split.cost > NEAR_TIE * leaf_cost)
             {
-                return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
+                return Ok(self.leaf(index, level, side).map(|()| leaf_cost)?);
             }
             bad += 1;
         }
         if split.left + split.right > refs_allowed {
             self.budget_leaves += 1;
             self.largest_budget_leaf = self.largest_budget_leaf.max(n);
-            return Ok(self.leaf(index, depth, side).map(|()| leaf_cost)?);
+            return Ok(self.leaf(index, level, side).map(|()| leaf_cost)?);
         }
         let (mut left_box, mut right_box) = (bbox, bbox);
         left_box.max[split.axis] = split.pos;
@@ -801,7 +802,15 @@ impl Builder<'_> {
             self.budget
                 .push(&mut self.nodes, KdNode::leaf(0, 0), "kd-tree nodes")?;
         }
-        let (nl, nr, handed) = self.partition(depth, side, &split)?;
+        let (nl, nr, handed) = self.partition(depth, (level, side), &split)?;
+        // The children's slots: the node's own for a child handed all its items (the other's,
+        // cleared by `partition`, is empty).
+        let next = depth + 1;
+        let (slot_l, slot_r) = match (handed, nr == 0) {
+            (true, true) => ((level, side), (next, UPPER)),
+            (true, false) => ((next, LOWER), (level, side)),
+            (false, _) => ((next, LOWER), (next, UPPER)),
+        };
         // The child handed the node's items is built next (the other child, empty, is a leaf at
         // once), so the bins just counted are still there.
         let reuse = binned && handed;
@@ -810,8 +819,8 @@ impl Builder<'_> {
         let share_r = refs_allowed.saturating_sub(share_l);
         let cost_l = self.node(
             children,
-            depth + 1,
-            LOWER,
+            next,
+            slot_l,
             left_box,
             share_l.max(nl),
             bad,
@@ -819,8 +828,8 @@ impl Builder<'_> {
         )?;
         let cost_r = self.node(
             children + 1,
-            depth + 1,
-            UPPER,
+            next,
+            slot_r,
             right_box,
             share_r.max(nr),
             bad,
@@ -837,13 +846,13 @@ impl Builder<'_> {
         Ok(cost)
     }
 
-    /// Makes node `index` a leaf of the items of `levels[depth][side]`.
-    fn leaf(&mut self, index: usize, depth: u32, side: usize) -> Result<(), BuildError> {
+    /// Makes node `index` a leaf of the items in the slot `levels[level][side]`.
+    fn leaf(&mut self, index: usize, level: u32, side: usize) -> Result<(), BuildError> {
         let mut ids = core::mem::take(&mut self.ids);
         ids.clear();
-        let count = self.items(depth, side).len();
+        let count = self.items(level, side).len();
         let result = grow(self.budget, &mut ids, count, "kd-tree build ids").and_then(|()| {
-            ids.extend(self.items(depth, side).iter().map(|it| it.prim));
+            ids.extend(self.items(level, side).iter().map(|it| it.prim));
             self.push_leaf(index, &ids)
         });
         self.ids = ids;
@@ -871,12 +880,18 @@ impl Builder<'_> {
                 what: "kd-tree references (at most 2^32)",
             });
         }
-        grow(
-            self.budget,
-            &mut self.prims,
-            offset + count,
-            "kd-tree leaf references",
-        )?;
+        // By half again, not `grow`'s eighth: the array only grows, and each growth may copy it
+        // whole into fresh pages (at an eighth, ~8 times its final size in all: a quarter of a
+        // million-triangle build's page faults, docs/performance.md, "Stop 48").
+        let (need, cap) = (offset + count, self.prims.capacity());
+        if need > cap {
+            grow(
+                self.budget,
+                &mut self.prims,
+                need.max(cap.saturating_add(cap / 2)),
+                "kd-tree leaf references",
+            )?;
+        }
         self.prims
             .extend(core::iter::repeat(Hit::INVALID_ID).take(pad));
         self.prims.extend_from_slice(members);
@@ -929,10 +944,10 @@ impl Builder<'_> {
     /// With `reuse`, the bin counts left by the last binned node are this node's: its parent cut
     /// off empty space and handed it its items unchanged ([`Builder::partition`]), so the tight
     /// bounds, the bins and their counts are the same; only the box, so the prices, differ.
-    fn binned_split(&mut self, depth: u32, side: usize, bbox: &Aabb, reuse: bool) -> Option<Split> {
+    fn binned_split(&mut self, level: u32, side: usize, bbox: &Aabb, reuse: bool) -> Option<Split> {
         let items = self
             .levels
-            .get(depth as usize)
+            .get(level as usize)
             .map_or(&[][..], |l| &l[side & 1][..]);
         let n = items.len();
         if !(reuse && self.bins.n == n) {
@@ -985,18 +1000,18 @@ impl Builder<'_> {
     /// cheaper side), `None` when there is no such position.
     fn exact_split(
         &mut self,
-        depth: u32,
+        level: u32,
         side: usize,
         bbox: &Aabb,
     ) -> Result<Option<Split>, BuildError> {
-        let n = self.items(depth, side).len();
+        let n = self.items(level, side).len();
         let mut events = core::mem::take(&mut self.events);
         let r = grow(self.budget, &mut events, 2 * n, "kd-tree build events");
         let pricer = Pricer::new(&self.costs, bbox);
         let mut best = Best::NONE;
         if n <= COUNTED {
             self.events = events;
-            counted_split(self.items(depth, side), bbox, &pricer, &mut best);
+            counted_split(self.items(level, side), bbox, &pricer, &mut best);
             return r.map(|()| best.split(&pricer));
         }
         if r.is_ok() {
@@ -1006,7 +1021,7 @@ impl Builder<'_> {
                     continue;
                 }
                 events.clear();
-                for it in self.items(depth, side) {
+                for it in self.items(level, side) {
                     let (a, b) = (it.lo[axis], it.hi[axis]);
                     if a == b {
                         events.push((u64::from(ordered(a)) << 2) | PLANAR);
@@ -1023,20 +1038,23 @@ impl Builder<'_> {
         r.map(|()| best.split(&pricer))
     }
 
-    /// Writes the children's items of the node `levels[depth][side]` into `levels[depth + 1]`
-    /// (lower, upper). Straddlers are cut at the plane; a part that turns out empty is dropped.
-    /// Returns the children's counts `(lower, upper)` and whether one child was handed the node's
-    /// items unchanged (the other is empty).
+    /// Writes the children's items of the node at `depth` whose items are in the slot
+    /// `levels[level][side]` into `levels[depth + 1]` (lower, upper), cleared first. Straddlers are
+    /// cut at the plane; a part that turns out empty is dropped. Returns the children's counts
+    /// `(lower, upper)` and whether one child was handed the node's items unchanged (left in the
+    /// node's slot, not written; the other is empty).
     fn partition(
         &mut self,
         depth: u32,
-        side: usize,
+        (level, side): (u32, usize),
         split: &Split,
     ) -> Result<(usize, usize, bool), BuildError> {
         let (axis, pos) = (split.axis, split.pos);
         let d = depth as usize;
         let (above, below) = self.levels.split_at_mut(d + 1);
-        let (Some(parent), Some([left, right])) = (above.get_mut(d), below.first_mut()) else {
+        let (Some(parent), Some([left, right])) =
+            (above.get_mut(level as usize), below.first_mut())
+        else {
             return Err(BuildError::CapacityExceeded {
                 what: "kd-tree depth",
             });
@@ -1053,15 +1071,15 @@ impl Builder<'_> {
             (to_left, to_right)
         };
         // A split that leaves one side empty (cutting off empty space) hands the node's items to the
-        // other child as they are: the buffers are swapped, not copied (the node never reads its
-        // items again, and its slot is rewritten before any other node reads it).
+        // other child as they are, in the node's own slot (`handed`): the node never reads them
+        // again, and the slot, at a level no deeper than the node, is rewritten only by a node
+        // above it, after this subtree. (Swapping the slot's buffer into the child's level, as
+        // before stop 48, moved large buffers between levels, which then grew again by copying.)
         if items.iter().all(|it| sides(it) == (true, false)) {
-            core::mem::swap(items, left);
-            return Ok((left.len(), 0, true));
+            return Ok((items.len(), 0, true));
         }
         if items.iter().all(|it| sides(it) == (false, true)) {
-            core::mem::swap(items, right);
-            return Ok((0, right.len(), true));
+            return Ok((0, items.len(), true));
         }
         let what = "kd-tree build triangles";
         // One slot more than the split's counts: room for the write that an item going the other
