@@ -1083,9 +1083,13 @@ impl Builder<'_> {
         }
         let what = "kd-tree build triangles";
         // One slot more than the split's counts: room for the write that an item going the other
-        // way leaves behind (below).
-        grow(self.budget, left, split.left + 1, what)?;
-        grow(self.budget, right, split.right + 1, what)?;
+        // way leaves behind (below). And a margin: a binned split's counts are its bins' (the
+        // root of a million-triangle sphereflake sent 10 more items left than counted, and a
+        // child past its room doubled by `push`, copying 12 MB into fresh pages; small nodes
+        // differ by a few), so a child's room is its count and a sixty-fourth, plus eight.
+        let room = |count: usize| count + count / 64 + 8;
+        grow(self.budget, left, room(split.left), what)?;
+        grow(self.budget, right, room(split.right), what)?;
         // An item that goes one way is written to both children's next slot, and only the side it
         // goes to counts it: no branch on the side, which is mispredicted about as often as not.
         // The pointers, capacities and lengths stay in locals while items take this path; the
