@@ -565,6 +565,24 @@ fn grow<T: Copy>(
     budget.reserve_to(v, cap, what)
 }
 
+/// `v`, or a copy of it in a block of its length when its spare room is more than a sixteenth of
+/// it: the tree keeps what it holds, and the arrays grew ahead (by half, or doubling) so as not to
+/// be copied often while they were built. The copy is taken only if the budget and the allocator
+/// allow it (it is only memory given back; `v` stays otherwise).
+fn fitted<T: Copy>(budget: &mut MemoryBudget, v: Vec<T>, what: &'static str) -> Vec<T> {
+    if v.capacity() - v.len() <= v.len() / 16 {
+        return v;
+    }
+    match budget.vec(v.len(), what) {
+        Ok(mut exact) => {
+            exact.extend_from_slice(&v);
+            budget.free(v);
+            exact
+        }
+        Err(_) => v,
+    }
+}
+
 struct Builder<'a> {
     mesh: &'a TriMesh,
     params: KdTreeParams,
@@ -677,8 +695,8 @@ pub(super) fn build(
     budget.free(ids);
     match result {
         Ok(_) => Ok(Built {
-            nodes,
-            prims,
+            nodes: fitted(budget, nodes, "kd-tree nodes"),
+            prims: fitted(budget, prims, "kd-tree leaf references"),
             depth,
             leaves,
             references,
