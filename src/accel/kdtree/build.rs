@@ -565,21 +565,27 @@ fn grow<T: Copy>(
     budget.reserve_to(v, cap, what)
 }
 
-/// `v`, or a copy of it in a block of its length when its spare room is more than a sixteenth of
+/// Replaces `v` by a copy in a block of its length when its spare room is more than a sixteenth of
 /// it: the tree keeps what it holds, and the arrays grew ahead (by half, or doubling) so as not to
-/// be copied often while they were built. The copy is taken only if the budget and the allocator
-/// allow it (it is only memory given back; `v` stays otherwise).
-fn fitted<T: Copy>(budget: &mut MemoryBudget, v: Vec<T>, what: &'static str) -> Vec<T> {
+/// be copied often while they were built. Where the memory limit has no room for the copy, `v`
+/// stays as it is (it fits the limit already); an allocator that refuses the copy fails the build,
+/// as any refusal does (`v` is then the caller's to release).
+fn fit<T: Copy>(
+    budget: &mut MemoryBudget,
+    v: &mut Vec<T>,
+    what: &'static str,
+) -> Result<(), BuildError> {
     if v.capacity() - v.len() <= v.len() / 16 {
-        return v;
+        return Ok(());
     }
     match budget.vec(v.len(), what) {
         Ok(mut exact) => {
-            exact.extend_from_slice(&v);
-            budget.free(v);
-            exact
+            exact.extend_from_slice(v);
+            budget.free(core::mem::replace(v, exact));
+            Ok(())
         }
-        Err(_) => v,
+        Err(BuildError::MemoryLimit { .. }) => Ok(()),
+        Err(e) => Err(e),
     }
 }
 
@@ -671,8 +677,8 @@ pub(super) fn build(
     });
     let Builder {
         budget,
-        nodes,
-        prims,
+        mut nodes,
+        mut prims,
         levels,
         events,
         ids,
@@ -693,10 +699,14 @@ pub(super) fn build(
     budget.free(levels);
     budget.free(events);
     budget.free(ids);
+    let result = result.and_then(|_| {
+        fit(budget, &mut nodes, "kd-tree nodes")?;
+        Ok(fit(budget, &mut prims, "kd-tree leaf references")?)
+    });
     match result {
-        Ok(_) => Ok(Built {
-            nodes: fitted(budget, nodes, "kd-tree nodes"),
-            prims: fitted(budget, prims, "kd-tree leaf references"),
+        Ok(()) => Ok(Built {
+            nodes,
+            prims,
             depth,
             leaves,
             references,
