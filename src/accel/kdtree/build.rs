@@ -1257,6 +1257,32 @@ mod tests {
     use super::*;
     use crate::workload::SplitMix64;
 
+    /// A finished array with much spare room is copied into a block of its length, its contents
+    /// and the budget's count kept; one with little spare room, or where the limit has no room for
+    /// the copy, stays as it is.
+    #[test]
+    fn the_finished_arrays_are_fitted_where_the_limit_allows() {
+        let size = core::mem::size_of::<u32>();
+        let mut budget = MemoryBudget::new(0);
+        let mut v: Vec<u32> = budget.vec(100, "test").unwrap();
+        v.extend(0..10);
+        fit(&mut budget, &mut v, "test").unwrap();
+        assert_eq!((v.len(), v.capacity()), (10, 10));
+        assert_eq!(v, (0..10).collect::<Vec<u32>>());
+        assert_eq!(budget.used(), 10 * size);
+        let mut tight: Vec<u32> = budget.vec(17, "test").unwrap();
+        tight.extend(0..16);
+        fit(&mut budget, &mut tight, "test").unwrap();
+        assert_eq!(tight.capacity(), 17, "a sixteenth spare is kept");
+        // A limit that holds the array but not a copy beside it.
+        let mut limited = MemoryBudget::new(100 * size + 5 * size);
+        let mut w: Vec<u32> = limited.vec(100, "test").unwrap();
+        w.extend(0..10);
+        fit(&mut limited, &mut w, "test").unwrap();
+        assert_eq!((w.len(), w.capacity()), (10, 100));
+        assert_eq!(limited.used(), 100 * size);
+    }
+
     /// The vector binning is the plain one: same tight bounds and the same bin of every bound, on random
     /// boxes over many magnitudes, with equal, huge and degenerate (flat) extents, and bins of 8 to
     /// 32 as the builder uses them.
