@@ -281,7 +281,8 @@ impl Axes {
     ) -> Option<u32> {
         let (blocks, res) = (&grid.blocks, grid.shape.res);
         // The block face after `face` on moving axis `a` (past the box's face when `face` is it:
-        // a plane no walk crosses, whose t is finite and never read).
+        // a plane no walk crosses, whose t, possibly infinite, is never read: an axis is stepped
+        // only while its face is not the box's).
         let beyond = |a: usize, face: u32| {
             if self.up(a) {
                 (face + BLOCK).min(res[a])
