@@ -761,8 +761,8 @@ impl Builder<'_> {
     }
 
     /// Builds the subtree of the node at `depth` whose items are in the slot `levels[level][side]`
-    /// (`slot = (level, side)`) into node `index` (already in the array), in `bbox`, allowed `refs_allowed` references, with `bad` bad refines above
-    /// it; returns its SAH cost. `reuse_bins`: the last binned node's bins are this node's (see
+    /// into node `index` (already in the array), in `bbox`, allowed `refs_allowed` references,
+    /// with `bad` bad refines above it; returns its SAH cost. `reuse_bins`: the last binned node's bins are this node's (see
     /// [`Builder::binned_split`]).
     #[allow(clippy::too_many_arguments)]
     fn node(
