@@ -419,6 +419,80 @@ static void test_options_init(void) {
   CHECK(o.user == NULL);
 }
 
+/* The build options as the first header declared them (DESIGN.md §4): what a program compiled then
+ * holds, however many fields were appended since. */
+typedef struct first_build_options {
+  uint32_t struct_size;
+  uint32_t structure;
+  uint64_t expected_rays;
+  const rq_ray *sample_rays;
+  size_t sample_ray_count;
+  size_t memory_limit;
+  void (*on_error)(void *, rq_status, const char *);
+  void *user;
+} first_build_options;
+
+/* Checks the defaults of a first-layout struct, `size` bytes written. */
+static void check_first_defaults(const first_build_options *o, size_t size, const char *what) {
+  CHECKF(o->struct_size == size, "%s: struct_size %u, expected %zu", what, (unsigned)o->struct_size, size);
+  CHECKF(o->structure == RQ_STRUCTURE_AUTO && o->expected_rays == 0 && o->sample_rays == NULL &&
+             o->sample_ray_count == 0 && o->memory_limit == 0 && o->on_error == NULL && o->user == NULL,
+         "%s: not the defaults", what);
+}
+
+/* A program compiled against an older, shorter struct: neither the unsized symbol (what such a
+ * program calls) nor the sized one writes past its end, and what they leave builds a scene. */
+static void test_older_struct_init(void) {
+  /* At the end of a page followed by an inaccessible one: a write past the struct faults. */
+  guarded g = guarded_alloc(sizeof(first_build_options));
+  first_build_options *o = (first_build_options *)(void *)g.p;
+  memset(o, 0xAB, sizeof *o);
+  (rq_build_options_init)((rq_build_options *)(void *)o); /* the symbol, not the header's macro */
+  check_first_defaults(o, sizeof *o, "the unsized symbol");
+  memset(o, 0xAB, sizeof *o);
+  rq_build_options_init_sized((rq_build_options *)(void *)o, sizeof *o);
+  check_first_defaults(o, sizeof *o, "the sized entry");
+  o->structure = RQ_STRUCTURE_KDTREE;
+  rq_mesh_desc d = tri_desc();
+  rq_scene *scene = NULL;
+  CHECK_STATUS(rq_scene_build(&d, (const rq_build_options *)(const void *)o, NULL, &scene), RQ_STATUS_OK);
+  if (scene) {
+    rq_ray r = hit_ray();
+    rq_hit h;
+    CHECK(rq_scene_intersect(scene, &r, &h) && h.prim == 0);
+    rq_scene_report rep;
+    memset(&rep, 0, sizeof rep);
+    rep.struct_size = sizeof rep;
+    CHECK_STATUS(rq_scene_report_get(scene, &rep), RQ_STATUS_OK);
+    CHECK(rep.structure == RQ_STRUCTURE_KDTREE);
+    rq_scene_free(scene);
+  }
+  guarded_free(&g);
+  /* Too small to hold struct_size: nothing written. */
+  unsigned char bytes[8];
+  memset(bytes, 0xAB, sizeof bytes);
+  rq_build_options_init_sized((rq_build_options *)(void *)bytes, 3);
+  int untouched = 1;
+  for (size_t i = 0; i < sizeof bytes; i++) {
+    untouched &= bytes[i] == 0xAB;
+  }
+  CHECK(untouched);
+  /* A struct as large as this header's, or larger: this header's bytes, no more. */
+  struct {
+    rq_build_options o;
+    unsigned char after[16];
+  } big;
+  memset(&big, 0xAB, sizeof big);
+  rq_build_options_init_sized(&big.o, sizeof big);
+  CHECK(big.o.struct_size == sizeof big.o);
+  CHECK(big.after[0] == 0xAB && big.after[15] == 0xAB);
+  /* The geometry description's unsized symbol writes its first layout, today the whole struct. */
+  rq_geometry_desc gd;
+  memset(&gd, 0xAB, sizeof gd);
+  (rq_geometry_desc_init)(&gd);
+  CHECK(gd.struct_size == sizeof gd && gd.mask == 0xFFFFFFFFu && gd.filter == NULL);
+}
+
 /* Builds the triangle with options whose first `size` bytes are those of `full`, in a guarded block
  * of exactly that many bytes, so reading a field that `size` does not cover faults. */
 static rq_status build_with_size(const rq_build_options *full, uint32_t size, rq_scene **out) {
@@ -767,6 +841,7 @@ int main(void) {
   test_null_arguments();
   test_batch_bounds();
   test_options_init();
+  test_older_struct_init();
   test_options_struct_size();
   test_report_struct_size();
   test_error_callback();

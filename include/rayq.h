@@ -102,11 +102,15 @@ enum rq_budget_kind
   : uint32_t
 #endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
  {
-  // The rays the caller will trace (default): the selector decides once, at the build.
+  // The rays the caller will trace (default): the selector decides at the build, on its sample
+  // rays; a scene left on the grid may still switch at `rq_scene_update` once the renderer's own
+  // tapped rays put W* at or below the rays remaining.
   RQ_BUDGET_EXPECTED = 0,
-  // An upper bound (a renderer that may stop early): below the estimated break-even the grid is
-  // kept for good; above it the scene starts on the grid and `rq_scene_update` switches as with
-  // an unknown budget, but never once the rays that may still come are fewer than W*.
+  // An upper bound (a renderer that may stop early): below the estimated break-even the scene
+  // stays on the grid unless the renderer's own tapped rays later put W* at or below the rays
+  // that may still come (`rq_scene_update`); above it the scene starts on the grid and
+  // `rq_scene_update` switches as with an unknown budget, but never once the rays that may
+  // still come are fewer than W*.
   RQ_BUDGET_AT_MOST = 1,
 };
 #ifndef __cplusplus
@@ -505,11 +509,22 @@ const struct rq_calibration *rq_calibration_builtin(void);
 // `calib` is NULL, the built-in handle, or a live handle not used afterwards.
 void rq_calibration_free(struct rq_calibration *calib);
 
-// Fills `desc` with the defaults: no triangles, mask `0xFFFFFFFF`, no culling, no filter. Does
-// nothing when `desc` is NULL.
+// Fills the first `size` bytes of `desc` (`sizeof(rq_geometry_desc)` as the caller's header
+// declares it) with the defaults: no triangles, mask `0xFFFFFFFF`, no culling, no filter;
+// `struct_size` says how many bytes were written (at most the library's own struct). The header's
+// `rq_geometry_desc_init(desc)` calls this with `sizeof(rq_geometry_desc)`. Does nothing when
+// `desc` is NULL or `size` is below 4.
 //
 // # Safety
-// `desc` is NULL or points to writable memory of `sizeof(rq_geometry_desc)` bytes.
+// `desc` is NULL or points to `size` writable bytes.
+void rq_geometry_desc_init_sized(struct rq_geometry_desc *desc, size_t size);
+
+// The first version's entry, for programs compiled before the header made `rq_geometry_desc_init`
+// a macro over [`rq_geometry_desc_init_sized`]: only the first layout's bytes are written, whatever
+// fields are appended later.
+//
+// # Safety
+// `desc` is NULL or points to writable memory of the first layout's size.
 void rq_geometry_desc_init(struct rq_geometry_desc *desc);
 
 // Builds a scene of `geometry_count` geometries (`geometries[i]` is geometry `i`; every element
@@ -598,10 +613,23 @@ rq_status rq_scene_set_vertices(struct rq_scene *scene,
                                 size_t vertex_stride);
 
 #if defined(RQ_WITH_OBJ)
-// Fills `opts` with the defaults (no error callback). Does nothing when `opts` is NULL.
+// Fills the first `size` bytes of `opts` (`sizeof(rq_obj_load_options)` as the caller's header
+// declares it) with the defaults (no error callback); `struct_size` says how many bytes were
+// written (at most the library's own struct). The header's `rq_obj_load_options_init(opts)` calls
+// this with `sizeof(rq_obj_load_options)`. Does nothing when `opts` is NULL or `size` is below 4.
 //
 // # Safety
-// `opts` is NULL or points to writable memory of `sizeof(rq_obj_load_options)` bytes.
+// `opts` is NULL or points to `size` writable bytes.
+void rq_obj_load_options_init_sized(struct rq_obj_load_options *opts, size_t size);
+#endif
+
+#if defined(RQ_WITH_OBJ)
+// The first version's entry, for programs compiled before the header made
+// `rq_obj_load_options_init` a macro over [`rq_obj_load_options_init_sized`]: only the first
+// layout's bytes are written, whatever fields are appended later.
+//
+// # Safety
+// `opts` is NULL or points to writable memory of the first layout's size.
 void rq_obj_load_options_init(struct rq_obj_load_options *opts);
 #endif
 
@@ -666,12 +694,25 @@ void rq_obj_free(struct rq_obj *obj);
 // `hook`, when not NULL, is callable with `user` from any thread for the rest of the program.
 rq_status rq_set_panic_hook(rq_panic_hook_fn hook, void *user);
 
-// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-// no error callback, no memory monitor, the library's clock (none in a build without `std`). Does
-// nothing when `opts` is NULL.
+// Fills the first `size` bytes of `opts` (`sizeof(rq_build_options)` as the caller's header
+// declares it) with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
+// no error callback, no memory monitor, the library's clock (none in a build without `std`);
+// `struct_size` says how many bytes were written (at most the library's own struct), so a program
+// built against an older, shorter struct has nothing past its end written. The header's
+// `rq_build_options_init(opts)` calls this with `sizeof(rq_build_options)`. Does nothing when
+// `opts` is NULL or `size` is below 4.
 //
 // # Safety
-// `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
+// `opts` is NULL or points to `size` writable bytes.
+void rq_build_options_init_sized(struct rq_build_options *opts, size_t size);
+
+// The first version's entry, for programs compiled before the header made `rq_build_options_init`
+// a macro over [`rq_build_options_init_sized`]: their struct may be that first layout, so only its
+// bytes are written (the defaults, `struct_size` their count), whatever fields were appended since.
+// A program compiled with this header reaches the sized entry instead.
+//
+// # Safety
+// `opts` is NULL or points to writable memory of the first layout's size.
 void rq_build_options_init(struct rq_build_options *opts);
 
 // Validates the mesh and builds a scene; `opts` NULL means defaults, `calib` NULL the built-in
@@ -759,3 +800,15 @@ rq_status rq_scene_update(struct rq_scene *scene, uint64_t rays_traced, uint64_t
 #endif  // __cplusplus
 
 #endif  /* RAYQ_H */
+
+#ifndef RAYQ_H_INITIALISERS
+#define RAYQ_H_INITIALISERS
+/* The initialisers as a program calls them: with the size of the struct this header declares, so a
+ * library newer than the header writes only the bytes that struct has (the unsized symbols write
+ * each struct's first layout, for programs compiled before these macros). */
+#define rq_build_options_init(opts) rq_build_options_init_sized((opts), sizeof(rq_build_options))
+#define rq_geometry_desc_init(desc) rq_geometry_desc_init_sized((desc), sizeof(rq_geometry_desc))
+#if defined(RQ_WITH_OBJ)
+#define rq_obj_load_options_init(opts) rq_obj_load_options_init_sized((opts), sizeof(rq_obj_load_options))
+#endif
+#endif  /* RAYQ_H_INITIALISERS */

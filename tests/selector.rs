@@ -956,3 +956,30 @@ fn a_re_check_that_does_not_fit_the_memory_limit_keeps_the_kd_tree() {
     scene.update(rays.len() as u64, 0).unwrap();
     assert_eq!(scene.report().structure, Structure::KdTree);
 }
+
+/// The report's bytes are the scene's after every `update`, also where the call lets the tap go
+/// without building anything (no rays remaining; a review found the report still counting it).
+#[test]
+fn the_report_counts_the_tap_only_while_the_scene_holds_it() {
+    let data = rayq::procedural::by_name("soup", 2_000).unwrap();
+    let c = Calibration::builtin();
+    let tap_bytes = rayq::scene::TAP_RAYS * std::mem::size_of::<rayq::Ray>();
+    let forced = Scene::build(
+        &data.as_source(),
+        &BuildOptions {
+            structure: Structure::Grid,
+            ..BuildOptions::DEFAULT
+        },
+        c,
+    )
+    .unwrap();
+    // An unknown budget starts on the grid with a tap.
+    let mut scene = Scene::build(&data.as_source(), &auto(0), c).unwrap();
+    assert_eq!(scene.report().structure, Structure::Grid);
+    assert_eq!(
+        scene.report().memory_bytes,
+        forced.report().memory_bytes + tap_bytes
+    );
+    scene.update(0, RAYS_REMAINING_NONE).unwrap();
+    assert_eq!(scene.report().memory_bytes, forced.report().memory_bytes);
+}

@@ -17,21 +17,21 @@ use crate::geometry::{Filter, Geometry, HitEx, RayEx};
 use crate::mesh::MeshSource;
 use crate::scene::Scene;
 
-/// Fills `desc` with the defaults: no triangles, mask `0xFFFFFFFF`, no culling, no filter. Does
-/// nothing when `desc` is NULL.
+/// Fills the first `size` bytes of `desc` (`sizeof(rq_geometry_desc)` as the caller's header
+/// declares it) with the defaults: no triangles, mask `0xFFFFFFFF`, no culling, no filter;
+/// `struct_size` says how many bytes were written (at most the library's own struct). The header's
+/// `rq_geometry_desc_init(desc)` calls this with `sizeof(rq_geometry_desc)`. Does nothing when
+/// `desc` is NULL or `size` is below 4.
 ///
 /// # Safety
-/// `desc` is NULL or points to writable memory of `sizeof(rq_geometry_desc)` bytes.
+/// `desc` is NULL or points to `size` writable bytes.
 #[no_mangle]
-pub unsafe extern "C" fn rq_geometry_desc_init(desc: *mut rq_geometry_desc) {
+pub unsafe extern "C" fn rq_geometry_desc_init_sized(desc: *mut rq_geometry_desc, size: usize) {
     boundary(|| {
-        if desc.is_null() {
-            return;
-        }
-        // SAFETY: the caller promises a writable rq_geometry_desc; write_unaligned takes any alignment.
+        // SAFETY: the caller promises `size` writable bytes at `desc` (or NULL).
         unsafe {
-            desc.write_unaligned(rq_geometry_desc {
-                struct_size: size_of::<rq_geometry_desc>() as u32,
+            super::init_prefix(desc, size, |struct_size| rq_geometry_desc {
+                struct_size,
                 mesh: rq_mesh_desc {
                     vertices: ptr::null(),
                     vertex_count: 0,
@@ -46,6 +46,21 @@ pub unsafe extern "C" fn rq_geometry_desc_init(desc: *mut rq_geometry_desc) {
             })
         }
     })
+}
+
+/// The bytes of `rq_geometry_desc`'s first layout (up to `filter_user`).
+const GEOMETRY_DESC_FIRST: usize = super::first_layout!(rq_geometry_desc, filter_user, *mut c_void);
+
+/// The first version's entry, for programs compiled before the header made `rq_geometry_desc_init`
+/// a macro over [`rq_geometry_desc_init_sized`]: only the first layout's bytes are written, whatever
+/// fields are appended later.
+///
+/// # Safety
+/// `desc` is NULL or points to writable memory of the first layout's size.
+#[no_mangle]
+pub unsafe extern "C" fn rq_geometry_desc_init(desc: *mut rq_geometry_desc) {
+    // SAFETY: as the caller promises.
+    unsafe { rq_geometry_desc_init_sized(desc, GEOMETRY_DESC_FIRST) }
 }
 
 /// The caller's filter and its user pointer.

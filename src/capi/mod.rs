@@ -54,6 +54,39 @@ pub const RQ_INVALID_ID: u32 = u32::MAX;
 /// `rays_remaining` for `rq_scene_update` when no rays remain (the last batch was traced): the scene
 /// never switches again. (`0` means "unknown".)
 pub const RQ_RAYS_REMAINING_NONE: u64 = u64::MAX;
+
+/// Writes the defaults of a growing struct (one that starts with a `u32` `struct_size`) to the
+/// caller's `out`, whose struct is `size` bytes (the `sizeof` its header declares): only the first
+/// `min(size, size_of::<T>())` bytes, and `defaults` is told that count for `struct_size`, so that a
+/// caller built against an older, shorter struct never has bytes past its end written, and the
+/// library then reads only fields it wrote. Nothing is written when `out` is NULL or the count is
+/// less than the `struct_size` field itself. How every `*_init` fills its struct.
+///
+/// # Safety
+/// `out` is NULL or points to `size` writable bytes.
+unsafe fn init_prefix<T>(out: *mut T, size: usize, defaults: impl FnOnce(u32) -> T) {
+    let n = size.min(core::mem::size_of::<T>());
+    if out.is_null() || n < core::mem::size_of::<u32>() {
+        return;
+    }
+    let value = defaults(n as u32);
+    // SAFETY: `n` bytes of `value` are readable (n ≤ size_of::<T>()), and the caller promises
+    // `size ≥ n` writable bytes at `out`; a byte copy needs no alignment and may copy padding.
+    unsafe {
+        core::ptr::copy_nonoverlapping((&value as *const T).cast::<u8>(), out.cast::<u8>(), n)
+    }
+}
+
+/// The bytes of a growing struct's first layout: up to the end of its last field `$last` (of type
+/// `$ty`). What the unsized `*_init` symbols write, for programs compiled before their header made
+/// them macros over the sized ones: such a program's struct is at least this long, however many
+/// fields later headers appended.
+macro_rules! first_layout {
+    ($struct:ty, $last:ident, $ty:ty) => {
+        core::mem::offset_of!($struct, $last) + core::mem::size_of::<$ty>()
+    };
+}
+pub(crate) use first_layout;
 // Spelt out above so that cbindgen can write it; the Rust API's value is the same by construction.
 const _: () = assert!(RQ_RAYS_REMAINING_NONE == crate::scene::RAYS_REMAINING_NONE);
 

@@ -4,7 +4,6 @@
 extern crate std;
 
 use core::ffi::{c_char, c_void, CStr};
-use core::mem::size_of;
 use core::ptr;
 use std::ffi::CString;
 use std::path::Path;
@@ -35,25 +34,43 @@ pub struct rq_obj_load_options {
     pub user: *mut c_void,
 }
 
-/// Fills `opts` with the defaults (no error callback). Does nothing when `opts` is NULL.
+/// Fills the first `size` bytes of `opts` (`sizeof(rq_obj_load_options)` as the caller's header
+/// declares it) with the defaults (no error callback); `struct_size` says how many bytes were
+/// written (at most the library's own struct). The header's `rq_obj_load_options_init(opts)` calls
+/// this with `sizeof(rq_obj_load_options)`. Does nothing when `opts` is NULL or `size` is below 4.
 ///
 /// # Safety
-/// `opts` is NULL or points to writable memory of `sizeof(rq_obj_load_options)` bytes.
+/// `opts` is NULL or points to `size` writable bytes.
 #[no_mangle]
-pub unsafe extern "C" fn rq_obj_load_options_init(opts: *mut rq_obj_load_options) {
+pub unsafe extern "C" fn rq_obj_load_options_init_sized(
+    opts: *mut rq_obj_load_options,
+    size: usize,
+) {
     boundary(|| {
-        if opts.is_null() {
-            return;
-        }
-        // SAFETY: the caller promises a writable struct; write_unaligned tolerates any alignment.
+        // SAFETY: the caller promises `size` writable bytes at `opts` (or NULL).
         unsafe {
-            opts.write_unaligned(rq_obj_load_options {
-                struct_size: size_of::<rq_obj_load_options>() as u32,
+            super::init_prefix(opts, size, |struct_size| rq_obj_load_options {
+                struct_size,
                 on_error: None,
                 user: ptr::null_mut(),
             })
         }
     })
+}
+
+/// The bytes of `rq_obj_load_options`' first layout (up to `user`).
+const OBJ_LOAD_OPTIONS_FIRST: usize = super::first_layout!(rq_obj_load_options, user, *mut c_void);
+
+/// The first version's entry, for programs compiled before the header made
+/// `rq_obj_load_options_init` a macro over [`rq_obj_load_options_init_sized`]: only the first
+/// layout's bytes are written, whatever fields are appended later.
+///
+/// # Safety
+/// `opts` is NULL or points to writable memory of the first layout's size.
+#[no_mangle]
+pub unsafe extern "C" fn rq_obj_load_options_init(opts: *mut rq_obj_load_options) {
+    // SAFETY: as the caller promises.
+    unsafe { rq_obj_load_options_init_sized(opts, OBJ_LOAD_OPTIONS_FIRST) }
 }
 
 impl From<ObjErrorKind> for rq_status {

@@ -1,5 +1,6 @@
 //! Scene functions of the C ABI.
 
+use core::ffi::c_void;
 use core::mem::{offset_of, size_of};
 use core::ptr;
 
@@ -17,22 +18,23 @@ use crate::select::calibration::Calibration;
 use crate::select::clock::Clock;
 use crate::select::sample::RaySource;
 
-/// Fills `opts` with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
-/// no error callback, no memory monitor, the library's clock (none in a build without `std`). Does
-/// nothing when `opts` is NULL.
+/// Fills the first `size` bytes of `opts` (`sizeof(rq_build_options)` as the caller's header
+/// declares it) with the defaults: AUTO, unknown budget, library-made sample rays, no memory limit,
+/// no error callback, no memory monitor, the library's clock (none in a build without `std`);
+/// `struct_size` says how many bytes were written (at most the library's own struct), so a program
+/// built against an older, shorter struct has nothing past its end written. The header's
+/// `rq_build_options_init(opts)` calls this with `sizeof(rq_build_options)`. Does nothing when
+/// `opts` is NULL or `size` is below 4.
 ///
 /// # Safety
-/// `opts` is NULL or points to writable memory of `sizeof(rq_build_options)` bytes.
+/// `opts` is NULL or points to `size` writable bytes.
 #[no_mangle]
-pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
+pub unsafe extern "C" fn rq_build_options_init_sized(opts: *mut rq_build_options, size: usize) {
     boundary(|| {
-        if opts.is_null() {
-            return;
-        }
-        // SAFETY: the caller promises a writable rq_build_options; write_unaligned tolerates any alignment.
+        // SAFETY: the caller promises `size` writable bytes at `opts` (or NULL).
         unsafe {
-            opts.write_unaligned(rq_build_options {
-                struct_size: size_of::<rq_build_options>() as u32,
+            super::init_prefix(opts, size, |struct_size| rq_build_options {
+                struct_size,
                 structure: rq_structure::RQ_STRUCTURE_AUTO,
                 expected_rays: 0,
                 sample_rays: ptr::null(),
@@ -49,6 +51,22 @@ pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
             })
         }
     })
+}
+
+/// The bytes of `rq_build_options`' first layout (up to `user`).
+const BUILD_OPTIONS_FIRST: usize = super::first_layout!(rq_build_options, user, *mut c_void);
+
+/// The first version's entry, for programs compiled before the header made `rq_build_options_init`
+/// a macro over [`rq_build_options_init_sized`]: their struct may be that first layout, so only its
+/// bytes are written (the defaults, `struct_size` their count), whatever fields were appended since.
+/// A program compiled with this header reaches the sized entry instead.
+///
+/// # Safety
+/// `opts` is NULL or points to writable memory of the first layout's size.
+#[no_mangle]
+pub unsafe extern "C" fn rq_build_options_init(opts: *mut rq_build_options) {
+    // SAFETY: as the caller promises.
+    unsafe { rq_build_options_init_sized(opts, BUILD_OPTIONS_FIRST) }
 }
 
 /// Options as read from C, with the defaults for fields the caller's `struct_size` does not cover.

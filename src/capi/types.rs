@@ -64,11 +64,15 @@ pub enum rq_structure {
 #[repr(u32)]
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum rq_budget_kind {
-    /// The rays the caller will trace (default): the selector decides once, at the build.
+    /// The rays the caller will trace (default): the selector decides at the build, on its sample
+    /// rays; a scene left on the grid may still switch at `rq_scene_update` once the renderer's own
+    /// tapped rays put W* at or below the rays remaining.
     RQ_BUDGET_EXPECTED = 0,
-    /// An upper bound (a renderer that may stop early): below the estimated break-even the grid is
-    /// kept for good; above it the scene starts on the grid and `rq_scene_update` switches as with
-    /// an unknown budget, but never once the rays that may still come are fewer than W*.
+    /// An upper bound (a renderer that may stop early): below the estimated break-even the scene
+    /// stays on the grid unless the renderer's own tapped rays later put W* at or below the rays
+    /// that may still come (`rq_scene_update`); above it the scene starts on the grid and
+    /// `rq_scene_update` switches as with an unknown budget, but never once the rays that may
+    /// still come are fewer than W*.
     RQ_BUDGET_AT_MOST = 1,
 }
 

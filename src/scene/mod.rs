@@ -58,12 +58,16 @@ pub enum Outcome {
 /// What [`BuildOptions::expected_rays`] means when it is not 0.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum BudgetKind {
-    /// The rays the caller will trace (default): the selector decides once, at the build.
+    /// The rays the caller will trace (default): the selector decides at the build, on its sample
+    /// rays; a scene left on the grid may still switch at [`Scene::update`] once the renderer's
+    /// own tapped rays put W* at or below the rays remaining.
     #[default]
     Expected,
     /// An upper bound (a renderer that may stop early, adaptive sampling): below the estimated
-    /// break-even the grid is kept for good; above it the scene starts on the grid and switches as
-    /// with an unknown budget, but never once the rays that may still come are fewer than W*.
+    /// break-even the scene stays on the grid unless the renderer's own tapped rays later put W* at
+    /// or below the rays that may still come ([`Scene::update`]); above it the scene starts on the
+    /// grid and switches as with an unknown budget, but never once the rays that may still come
+    /// are fewer than W*.
     AtMost,
 }
 
@@ -439,20 +443,13 @@ impl Scene {
         sample_kdtree(tree, &self.mesh, Some(&tap.rays()), &params);
         let kd_ns = time_samples(tree, &self.mesh, Some(&tap.rays()), &params, &clock);
         let mut budget = self.options.budget();
-        let built = budget
+        // A refusal is the call's error; the tap is gone either way (`update` refreshes the report).
+        let grid = budget
             .charge(
                 self.memory_bytes() + tap.memory_bytes(),
                 "the scene's mesh, kd-tree and tap",
             )
-            .and_then(|()| UniformGrid::build(&self.mesh, &self.options.grid, &mut budget));
-        let grid = match built {
-            Ok(grid) => grid,
-            Err(e) => {
-                // The tap is gone: the report's bytes say so.
-                self.refresh_report();
-                return Err(e);
-            }
-        };
+            .and_then(|()| UniformGrid::build(&self.mesh, &self.options.grid, &mut budget))?;
         let features = sample_grid(&grid, &self.mesh, Some(&tap.rays()), &params);
         let grid_ns = time_samples(&grid, &self.mesh, Some(&tap.rays()), &params, &clock);
         if grid_ns > 0 && grid_ns < kd_ns && !features.has_heavy_cell() {
@@ -463,7 +460,6 @@ impl Scene {
         } else {
             grid.release(&mut budget);
         }
-        self.refresh_report();
         Ok(())
     }
 
@@ -631,6 +627,14 @@ impl Scene {
     /// must hold them; a refusal is the call's error and ends the re-check), times them on it, and
     /// keeps whichever took less (outcome [`Outcome::GridFasterPerRay`] for the grid). Once only.
     pub fn update(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
+        let result = self.update_held(rays_traced, rays_remaining);
+        // Whatever the call let go (the tap, a structure), the report's bytes and fields say so.
+        self.refresh_report();
+        result
+    }
+
+    /// [`Scene::update`] but for the report's refresh.
+    fn update_held(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
         if rays_remaining == RAYS_REMAINING_NONE {
             self.online = None;
@@ -744,7 +748,6 @@ impl Scene {
         self.online = None;
         self.tap = None;
         self.report.outcome = Outcome::OnlineSwitched;
-        self.refresh_report();
         Ok(())
     }
 
