@@ -13,8 +13,8 @@ pub(super) const U32: f32 = f32::EPSILON / 2.0;
 /// Box, resolution and margin of a grid (all zero for an empty one).
 ///
 /// Guarantees (non-empty): `cell_size[a] = (max − min)[a] / res[a]` in f32 (the planes the walk
-/// computes, `min + k·cell_size`, are the ones tests recompute), `res[a] ≥ 1`, the product of `res`
-/// is below `u32::MAX`, and every non-degenerate triangle lies inside `bounds` by at least the
+/// computes, `min + k·cell_size`, are the ones tests recompute), `1 ≤ res[a] ≤`
+/// [`MAX_AXIS_CELLS`], the product of `res` is below `u32::MAX`, and every non-degenerate triangle lies inside `bounds` by at least the
 /// padding of [`Shape::new`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Shape {
@@ -110,6 +110,12 @@ impl Shape {
 /// cell's units with the margins and slacks normal too.
 const MIN_CELL: f64 = 7.888_609_052_210_118e-31;
 
+/// The most cells on one axis (2^30): the insertion clamps f32 cell coordinates to this before it
+/// truncates them to integers (`voxel::Cells`), so no axis may have a cell past it. (A grid with
+/// more cells on an axis listed every triangle past cell 2^30 in that cell alone, where the walk
+/// never looked: a review's line of 4 000 triangles at λ = 2.75·10⁵, 1.1·10⁹ cells on x.)
+pub(super) const MAX_AXIS_CELLS: u32 = 1 << 30;
+
 /// The padded box and cells per axis for `live` triangles in `tight` at density `lambda`.
 fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), BuildError> {
     let ext = tight.extent();
@@ -150,7 +156,8 @@ fn layout(tight: Aabb, live: usize, lambda: f32) -> Result<(Aabb, [u32; 3]), Bui
                     split[a] = false;
                     changed = true;
                 }
-                res[a] = math::floor64(r + 0.5).clamp(1.0, target.min(f64::from(u32::MAX))) as u32;
+                res[a] =
+                    math::floor64(r + 0.5).clamp(1.0, target.min(f64::from(MAX_AXIS_CELLS))) as u32;
             } else {
                 res[a] = 1;
             }

@@ -712,3 +712,34 @@ fn a_dense_object_does_not_set_the_outer_grids_resolution() {
         grid.release(&mut budget);
     }
 }
+
+/// No axis gets more cells than the insertion's cap can name: at a density that asks for 1.1·10⁹
+/// cells along one axis, a triangle near that axis's far end is still listed in its own cell (a
+/// review's finding: every triangle past cell 2^30 was listed in that cell alone).
+#[test]
+fn no_axis_has_a_cell_past_the_insertion_cap() {
+    let tight = Aabb {
+        min: Vec3::ZERO,
+        max: Vec3::new(1.0e6, 0.5, 0.5),
+    };
+    let shape = Shape::new(tight, 4000, 2.75e5).unwrap();
+    assert!(
+        shape.res[0] <= super::layout::MAX_AXIS_CELLS,
+        "{:?}",
+        shape.res
+    );
+    let cells = Cells::new(&shape);
+    let tri = [
+        Vec3::new(0.99e6, 0.0, 0.0),
+        Vec3::new(0.99e6 + 10.0, 0.5, 0.0),
+        Vec3::new(0.99e6, 0.5, 0.5),
+    ];
+    let fp = cells.footprint(&tri);
+    let cell = ((f64::from(tri[0].x) - f64::from(shape.bounds.min.x))
+        / f64::from(shape.cell_size.x)) as u32;
+    assert!(
+        fp.lo[0] <= cell && cell <= fp.hi[0],
+        "footprint {fp:?} misses cell {cell} of {:?}",
+        shape.res
+    );
+}

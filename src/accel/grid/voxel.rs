@@ -22,7 +22,7 @@
 
 use glam::{Vec3, Vec3A, Vec4};
 
-use super::layout::Shape;
+use super::layout::{Shape, MAX_AXIS_CELLS};
 use slabs::slab_axis;
 
 mod slabs;
@@ -119,11 +119,14 @@ impl Cells {
         // Each `res − 1` is exact in f32 up to 2^24: then the clamp to the last cell is done on
         // the f32 value, before truncation (truncation is monotone and keeps integers).
         let exact_cap = shape.res.iter().all(|r| (1..=(1 << 24) + 1).contains(r));
+        // Above 2^24 cells the cap is 2^30, at or past every axis's last cell (`Shape`'s bound),
+        // so the clamp to the last cell after truncation finds every cell.
+        debug_assert!(shape.res.iter().all(|&r| r <= MAX_AXIS_CELLS));
         let cap = |a: usize| {
             if exact_cap {
                 shape.res[a].saturating_sub(1) as f32
             } else {
-                1_073_741_824.0
+                MAX_AXIS_CELLS as f32
             }
         };
         let stride = [
