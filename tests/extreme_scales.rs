@@ -358,3 +358,74 @@ fn a_small_triangle_in_a_scene_spanning_1e38_agrees() {
         &rays,
     );
 }
+
+/// Triangles near f32's top, rays from so far the other way that `box − origin` overflows f32
+/// though every coordinate and every hit's t is finite: on all three axes with a finite and an
+/// infinite `tmax`, on one axis, and with the hits behind the origin (`tmin = −∞`). The kd-tree
+/// lost most of these hits (its box entry came out +∞, or its exit −∞) until its clip left such
+/// axes unconstrained (a review's finding); the grid walks them from its box's entry point.
+#[test]
+fn origins_whose_distance_to_the_box_overflows_agree() {
+    // 200 triangles of about 2·10³⁷ around points `at(r)`, r uniform in the unit cube.
+    let scene = |seed: u64, at: &dyn Fn(Vec3) -> Vec3| {
+        let mut rng = SplitMix64::new(seed);
+        let mut data = MeshData::default();
+        for i in 0..200u32 {
+            let p = at(rng.next_vec3());
+            for _ in 0..3 {
+                data.vertices
+                    .push((p + (rng.next_vec3() - 0.5) * 2.0e37).to_array());
+            }
+            data.indices.push([3 * i, 3 * i + 1, 3 * i + 2]);
+        }
+        data
+    };
+    // Rays from `org` towards (or, with `behind`, away from) points `at(r)`, the direction scaled
+    // so that t is about 10³⁸; the difference is taken in f64, where it does not overflow.
+    let rays = |seed: u64, at: &dyn Fn(Vec3) -> Vec3, org: Vec3, behind: bool| {
+        let mut rng = SplitMix64::new(seed);
+        (0..600)
+            .map(|k| {
+                let d = (at(rng.next_vec3()).as_dvec3() - org.as_dvec3()) / 1.0e38;
+                let d = if behind { -d } else { d }.as_vec3();
+                match (behind, k % 2) {
+                    (true, _) => Ray::segment(org, d, f32::NEG_INFINITY, f32::INFINITY),
+                    (false, 0) => Ray::new(org, d),
+                    (false, _) => Ray::segment(org, d, 0.0, 3.0e38),
+                }
+            })
+            .collect::<Vec<_>>()
+    };
+    let all_axes = |r: Vec3| Vec3::splat(1.0e38) + r * 2.0e38;
+    let one_axis = |r: Vec3| {
+        Vec3::new(
+            1.0e38 + r.x * 2.0e38,
+            (r.y - 0.5) * 2.0e38,
+            (r.z - 0.5) * 2.0e38,
+        )
+    };
+    let behind = |r: Vec3| {
+        Vec3::new(
+            -1.0e38 - r.x * 2.0e38,
+            (r.y - 0.5) * 2.0e38,
+            (r.z - 0.5) * 2.0e38,
+        )
+    };
+    // A case's name, where its triangles are, the rays' origin, and whether the hits are behind it.
+    type Case<'a> = (&'a str, &'a dyn Fn(Vec3) -> Vec3, Vec3, bool);
+    let cases: [Case; 3] = [
+        ("all axes", &all_axes, Vec3::splat(-3.4e38), false),
+        ("one axis", &one_axis, Vec3::new(-3.4e38, 0.0, 0.0), false),
+        ("behind", &behind, Vec3::new(3.4e38, 0.0, 0.0), true),
+    ];
+    for (k, (name, at, org, back)) in cases.into_iter().enumerate() {
+        let data = scene(7 + k as u64, at);
+        let (g, t) = (
+            grid(&data, &GridParams::DEFAULT),
+            kd(&data, &KdTreeParams::DEFAULT),
+        );
+        let rays = rays(70 + k as u64, at, org, back);
+        let hits = agree(name, &data, &[("grid", &g), ("kd-tree", &t)], &rays);
+        assert!(hits > 30, "{name}: only {hits} of {} rays hit", rays.len());
+    }
+}

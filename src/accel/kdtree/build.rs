@@ -108,6 +108,17 @@ pub(super) struct Built {
     pub largest_budget_leaf: usize,
 }
 
+/// The builder's counts before a subtree's build ([`Builder::mark`]).
+#[derive(Clone, Copy)]
+struct Mark {
+    prims: usize,
+    leaves: u32,
+    references: usize,
+    depth: u32,
+    budget_leaves: usize,
+    largest_budget_leaf: usize,
+}
+
 /// Why a build stopped before its tree was done.
 pub(super) enum Stop {
     /// An allocation, the memory limit, the monitor or a capacity refused.
@@ -817,7 +828,7 @@ impl Builder<'_> {
         let (mut left_box, mut right_box) = (bbox, bbox);
         left_box.max[split.axis] = split.pos;
         right_box.min[split.axis] = split.pos;
-        let mark = (self.prims.len(), self.leaves, self.references);
+        let mark = self.mark();
         // The children side by side, after every node made so far (an even index: see the root).
         let children = self.nodes.len();
         debug_assert!(children % 2 == 0);
@@ -929,17 +940,29 @@ impl Builder<'_> {
         Ok(())
     }
 
+    /// What a subtree's build changes of the builder's counts, taken before it starts, so that a
+    /// retraction can put them back.
+    fn mark(&self) -> Mark {
+        Mark {
+            prims: self.prims.len(),
+            leaves: self.leaves,
+            references: self.references,
+            depth: self.depth,
+            budget_leaves: self.budget_leaves,
+            largest_budget_leaf: self.largest_budget_leaf,
+        }
+    }
+
     /// Tears the subtree of node `index` down into one leaf of its triangles (each once): its
-    /// nodes (from `children` on) and the references made since `mark` (prims length, leaves,
-    /// references) go.
-    fn retract(
-        &mut self,
-        index: usize,
-        children: usize,
-        mark: (usize, u32, usize),
-    ) -> Result<(), BuildError> {
-        let (prims_len, leaves, references) = mark;
+    /// nodes (from `children` on) and the references made since `mark` go, and the counts are
+    /// those at `mark` (the deepest leaf and the budget's leaves included: the subtree's are gone,
+    /// and `mark` was taken after the node's own depth was counted).
+    fn retract(&mut self, index: usize, children: usize, mark: Mark) -> Result<(), BuildError> {
+        let prims_len = mark.prims;
         self.nodes.truncate(children);
+        self.depth = mark.depth;
+        self.budget_leaves = mark.budget_leaves;
+        self.largest_budget_leaf = mark.largest_budget_leaf;
         let mut ids = core::mem::take(&mut self.ids);
         ids.clear();
         let held = self.prims.len() - prims_len;
@@ -953,8 +976,8 @@ impl Builder<'_> {
             ids.sort_unstable();
             ids.dedup();
             self.prims.truncate(prims_len);
-            self.leaves = leaves;
-            self.references = references;
+            self.leaves = mark.leaves;
+            self.references = mark.references;
             self.push_leaf(index, &ids)
         });
         self.ids = ids;

@@ -8,8 +8,9 @@
 //! are computed and widened by 8 ulps (`slack`). At a split, `t = (s − o)/d` is bracketed by
 //! the two products of `fl(s − o)` with `1/d` rounded and scaled by `1 ± 2^-20` (16 ulps, once per
 //! ray): four roundings of relative size `2^-24` each leave the larger product at least 11 ulps
-//! beyond the exact `t` and the smaller one as far below (or infinite, if a product overflows:
-//! wider still); underflow adds at most half a subnormal unit, covered by `T_FLOOR` on each side. A
+//! beyond the exact `t` and the smaller one as far below (no product overflows: an axis whose box
+//! faces' `t` reach `f32::MAX / 4`, or whose `lo − o` overflows, is left unconstrained by
+//! `Clip::new`); underflow adds at most half a subnormal unit, covered by `T_FLOOR` on each side. A
 //! subtree is skipped only when the best hit so far is strictly before its widened entry, so a
 //! nearer hit, or an equally near one with a lower id, is never skipped.
 
@@ -89,8 +90,8 @@ impl Clip {
     /// that axis `±∞` (the ray never crosses the plane: the near child holds the origin when `t` is
     /// `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children: the ray
     /// lies in the plane, which both closed boxes hold). A component whose inverse overflows, or
-    /// underflows (so its relative error is unbounded), gets NaN: no constraint on that axis, every
-    /// split visits both sides. An array of four, indexed by the node's 2-bit axis, needs no
+    /// underflows (so its relative error is unbounded), or whose box faces' `t` are not safely
+    /// finite, gets NaN: no constraint on that axis, every split visits both sides. An array of four, indexed by the node's 2-bit axis, needs no
     /// checks.
     #[inline(always)]
     pub(super) fn new(ray: &Ray, bounds: &Aabb) -> Option<Clip> {
@@ -114,8 +115,17 @@ impl Clip {
         let magnitude = inv.abs();
         let bounded =
             magnitude.cmplt(Vec3A::INFINITY) & magnitude.cmpge(Vec3A::splat(f32::MIN_POSITIVE));
-        let inv = Vec3A::select(bounded | zero, inv, Vec3A::NAN);
         let (ta, tb) = ((lo - o) * inv, (hi - o) * inv);
+        // An axis whose face `t` is not safely finite (`lo − o` itself may overflow f32 when the
+        // coordinates do not: an origin at −3·10³⁸ and a box at 10³⁸) bounds nothing: no
+        // constraint there, every split on it visits both sides. Below `f32::MAX / 4` every split's
+        // bracket is finite too: a split lies in `[lo, hi]`, so (rounding being monotone)
+        // `|fl(s − o)·inv|` is at most the larger face's `|t|`, and the bracket's slack is tiny.
+        // (Without this the box's entry could be +∞ or its exit −∞, and a hit at a finite `t` was
+        // lost: a review's rays from −3.4·10³⁸, 248 of 268 hits.)
+        let safe = ta.abs().max(tb.abs()).cmplt(Vec3A::splat(f32::MAX * 0.25));
+        let bounded = bounded & safe;
+        let inv = Vec3A::select(bounded | zero, inv, Vec3A::NAN);
         let (near, far) = (ta.min(tb), ta.max(tb));
         let near = near - slack(near);
         let far = far + slack(far);
