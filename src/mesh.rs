@@ -45,7 +45,11 @@ pub trait MeshSource {
     fn vertex_count(&self) -> usize;
     /// Number of triangles.
     fn triangle_count(&self) -> usize;
-    /// Vertex `i` (`i < vertex_count()`).
+    /// Vertex `i` (`i < vertex_count()`). The same value every time it is asked: the copy checks
+    /// every vertex in one pass and reads them again in the next (a second check per corner cost
+    /// the grid's build 4 % of its instructions). A source that answers differently can leave a
+    /// non-finite corner in the mesh, whose answers are then unspecified (never unsafe); slices and
+    /// the C API's arrays cannot.
     fn vertex(&self, i: usize) -> [f32; 3];
     /// The three vertex indices of triangle `i` (`i < triangle_count()`), not yet checked.
     fn triangle(&self, i: usize) -> [u32; 3];
@@ -108,6 +112,24 @@ pub trait MeshSource {
     }
 }
 
+/// Whether every coordinate of `tri` is finite (`x − x` is 0 for a finite `x`, NaN otherwise).
+#[inline(always)]
+#[allow(clippy::eq_op)] // `x − x` on purpose: it is the finiteness test.
+fn finite(tri: &[Vec3; 3]) -> bool {
+    let [p, q, r] = tri.map(glam::Vec3A::from);
+    ((p - p) + (q - q) + (r - r)).cmpeq(glam::Vec3A::ZERO).all()
+}
+
+/// The refusal of a triangle (indices `idx`) for its first non-finite corner in `tri` (its first
+/// corner's index when all are finite).
+#[cold]
+fn non_finite_corner(tri: &[Vec3; 3], idx: [u32; 3]) -> MeshError {
+    let k = (0..3).find(|&k| !tri[k].is_finite()).unwrap_or(0);
+    MeshError::NonFiniteVertex {
+        vertex: idx[k] as usize,
+    }
+}
+
 /// The refusal of triangle `triangle`, whose indices `idx` include one not below `vertex_count`.
 #[cold]
 fn index_out_of_range(triangle: usize, idx: [u32; 3], vertex_count: usize) -> MeshError {
@@ -147,7 +169,11 @@ impl<'a> Classified<'a> {
     /// otherwise taken into the bounds.
     #[inline(always)]
     fn record(&mut self, i: usize, tri: &[Vec3; 3]) {
-        if is_degenerate(tri) {
+        // The f64 product first (exact enough for nearly every triangle: non-zero means area),
+        // and where it is zero the exact one, since f64 rounds a tiny edge against a huge one
+        // away (a review's tetrahedron with corners at 2^30 and 2^-30 lost a face of area ~1 and
+        // leaked rays).
+        if edge_cross(tri) == glam::DVec3::ZERO && crate::triangle::edge_cross_is_zero(tri) {
             if let Some(word) = self.flags.get_mut(i / 32) {
                 *word |= 1 << (i % 32);
             }
@@ -359,9 +385,13 @@ impl TriMesh {
     }
 
     /// New positions for the vertices of geometry `g` (`vertex(i)` for each of its
-    /// `vertex_count`): same count and topology. Refuses a non-finite coordinate (nothing changes
-    /// then); afterwards the triangles, degenerate flags and bounds are those of the moved mesh.
-    pub fn set_vertices(
+    /// `vertex_count`): same count and topology. Refuses a non-finite coordinate, of any vertex
+    /// (nothing changes then) or of a corner as it is written (a `vertex` that answers differently
+    /// when asked again: the geometry's triangles are then partly moved and its flags and the
+    /// bounds stale, for the caller to restore with [`TriMesh::restore_triangles`], as
+    /// `Scene::set_vertices` does); afterwards the triangles, degenerate flags and bounds are those
+    /// of the moved mesh.
+    pub(crate) fn set_vertices(
         &mut self,
         g: usize,
         vertex: &dyn Fn(usize) -> [f32; 3],
@@ -381,7 +411,15 @@ impl TriMesh {
         }
         let range = self.geometry_start(g) as usize..self.geometry_start(g + 1) as usize;
         for i in range.clone() {
-            self.tris[i] = self.indices[i].map(|vi| Vec3::from(vertex(vi as usize)));
+            let idx = self.indices[i];
+            let tri = idx.map(|vi| Vec3::from(vertex(vi as usize)));
+            if !finite(&tri) {
+                return Err(BuildError::InvalidGeometry {
+                    geometry: g,
+                    error: non_finite_corner(&tri, idx),
+                });
+            }
+            self.tris[i] = tri;
         }
         self.classify(range);
         Ok(())
@@ -472,13 +510,15 @@ impl TriMesh {
     }
 }
 
-/// Zero area, decided exactly enough that every structure agrees: the edge cross product, computed in
-/// f64 from the f32 coordinates, is exactly zero.
-#[inline]
-fn is_degenerate(t: &[Vec3; 3]) -> bool {
+/// The edge cross product `(p1 − p0) × (p2 − p0)` in f64 from the f32 coordinates: non-zero means
+/// the triangle has area (a rounded product is zero only if the exact one is tiny against its
+/// terms); zero is confirmed exactly before a triangle is flagged degenerate (`Classified::record`,
+/// the one place that decides it for every structure).
+#[inline(always)]
+fn edge_cross(t: &[Vec3; 3]) -> glam::DVec3 {
     let e1 = t[1].as_dvec3() - t[0].as_dvec3();
     let e2 = t[2].as_dvec3() - t[0].as_dvec3();
-    e1.cross(e2) == glam::DVec3::ZERO
+    e1.cross(e2)
 }
 
 /// An owned indexed mesh (vertex positions plus three indices per triangle), as loaders and the

@@ -117,9 +117,16 @@ pub fn parse_obj(mut reader: impl BufRead, path: &Path) -> Result<MeshData, ObjE
                 ))
             }
         }
-        let text = match line.iter().position(|&b| b == b'#') {
-            Some(hash) => &line[..hash],
-            None => &line[..],
+        // A UTF-8 byte-order mark (editors on Windows write one) is not part of the first line's
+        // keyword: read as one, it hid the first `v` and shifted every index after it.
+        let start = if line_no == 1 && line.starts_with(b"\xEF\xBB\xBF") {
+            3
+        } else {
+            0
+        };
+        let text = match line[start..].iter().position(|&b| b == b'#') {
+            Some(hash) => &line[start..start + hash],
+            None => &line[start..],
         };
         let mut words = text
             .split(u8::is_ascii_whitespace)
@@ -287,6 +294,18 @@ mod tests {
         assert_eq!(m.vertices[1], [1.0, 0.0, 0.0], "w is ignored");
         assert_eq!(m.vertices[4], [0.0, 0.0, 1.0]);
         assert_eq!(m.indices, [[0, 1, 2], [0, 2, 3], [4, 0, 1]]);
+    }
+
+    /// A byte-order mark before the first line is not part of its keyword (a review's file lost
+    /// its first vertex to it and shifted every index); elsewhere it is no keyword.
+    #[test]
+    fn a_byte_order_mark_is_skipped() {
+        let m = parse("\u{feff}v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0\nf 1 2 3\n").unwrap();
+        assert_eq!(m.vertices.len(), 4);
+        assert_eq!(m.vertices[0], [0.0, 0.0, 0.0]);
+        assert_eq!(m.indices, [[0, 1, 2]]);
+        let later = parse("v 0 0 0\n\u{feff}v 1 0 0\n").unwrap();
+        assert_eq!(later.vertices.len(), 1);
     }
 
     #[test]

@@ -429,3 +429,30 @@ fn origins_whose_distance_to_the_box_overflows_agree() {
         assert!(hits > 30, "{name}: only {hits} of {} rays hit", rays.len());
     }
 }
+
+/// A face of area ~1 whose corners span sixty binary orders of magnitude (2^30 and 2^-30): its
+/// edge cross product rounds to zero in f64, and the mesh flagged it degenerate, so no structure
+/// tested it and a ray from inside the closed tetrahedron left through it (a review's finding).
+/// Zero is now confirmed exactly before a triangle is flagged.
+#[test]
+fn a_face_whose_f64_cross_product_rounds_to_zero_is_hit() {
+    let (big, tiny) = (2f32.powi(30), 2f32.powi(-30));
+    let data = MeshData {
+        vertices: vec![
+            [0.0, big, big],
+            [0.0, tiny, 0.0],
+            [0.0, 0.0, tiny],
+            [1.0, 0.0, 0.0],
+        ],
+        indices: vec![[0, 1, 2], [0, 1, 3], [1, 2, 3], [2, 0, 3]],
+    };
+    let mesh = mesh_of(&data);
+    assert!(!mesh.is_degenerate(0));
+    let ray = Ray::new(Vec3::new(0.5, 1.0, 1.0), Vec3::new(-1.0, 0.0, 0.0));
+    let (g, t) = (
+        grid(&data, &GridParams::DEFAULT),
+        kd(&data, &KdTreeParams::DEFAULT),
+    );
+    let hits = agree("cross", &data, &[("grid", &g), ("kd-tree", &t)], &[ray]);
+    assert_eq!(hits, 1);
+}

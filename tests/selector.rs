@@ -983,3 +983,103 @@ fn the_report_counts_the_tap_only_while_the_scene_holds_it() {
     scene.update(0, RAYS_REMAINING_NONE).unwrap();
     assert_eq!(scene.report().memory_bytes, forced.report().memory_bytes);
 }
+
+/// No sample ray — none asked for (`camera_side` 0) or an empty set given — leaves nothing to
+/// estimate from: the estimates are NaN and the grid stays (a review found a kd-tree built as a
+/// trial on the calibration's constants alone and kept by a check on no rays).
+#[test]
+fn no_sample_rays_give_no_estimate_and_keep_the_grid() {
+    let data = kd_friendly();
+    let none = BuildOptions {
+        samples: rayq::select::sample::SampleParams {
+            camera_side: 0,
+            ..rayq::select::sample::SampleParams::DEFAULT
+        },
+        ..auto(1_000_000_000)
+    };
+    let empty: Vec<rayq::Ray> = Vec::new();
+    for scene in [
+        Scene::build(&data.as_source(), &none, Calibration::builtin()).unwrap(),
+        Scene::build_with_samples(
+            &data.as_source(),
+            &auto(1_000_000_000),
+            Calibration::builtin(),
+            Some(&empty),
+        )
+        .unwrap(),
+    ] {
+        let r = scene.report();
+        assert!(
+            r.grid_ray_seconds.is_nan() && r.break_even_rays.is_nan(),
+            "{r:?}"
+        );
+        assert_eq!(
+            (r.structure, r.outcome),
+            (Structure::Grid, Outcome::GridFasterPerRay)
+        );
+    }
+}
+
+/// Moving vertices rebuilds for the rays still to come: after `RAYS_REMAINING_NONE` nothing
+/// switches again, and under an upper bound the rays traced before the move still count against
+/// it (a review found both forgotten by `set_vertices`).
+#[test]
+fn moving_vertices_keeps_what_the_rays_traced_settled() {
+    let data = kd_friendly();
+    let c = calibration(100.0, 10.0);
+    let same = |i: usize| data.vertices[i];
+    // After the caller said no rays remain.
+    let mut scene = Scene::build(&data.as_source(), &auto(0), &c).unwrap();
+    let w = scene.report().break_even_rays;
+    assert!(w.is_finite() && w > 0.0, "{w}");
+    scene.update(1, RAYS_REMAINING_NONE).unwrap();
+    scene.set_vertices(0, &same).unwrap();
+    scene.update(w.ceil() as u64 + 1, 0).unwrap();
+    assert_eq!(scene.report().structure, Structure::Grid);
+    // Under a bound, with fewer than W* rays left of it after the move.
+    let bound = (w * 1000.0) as u64;
+    let options = BuildOptions {
+        budget_kind: BudgetKind::AtMost,
+        ..auto(bound)
+    };
+    let mut scene = Scene::build(&data.as_source(), &options, &c).unwrap();
+    assert_eq!(scene.report().outcome, Outcome::OnlineOnGrid);
+    let w = scene.report().break_even_rays;
+    scene.update(bound - (w as u64) / 2, 0).unwrap();
+    assert_eq!(scene.report().structure, Structure::Grid);
+    scene.set_vertices(0, &same).unwrap();
+    scene.update(w.ceil() as u64 + 1, 0).unwrap();
+    assert_eq!(
+        scene.report().structure,
+        Structure::Grid,
+        "switched with {} rays traced of at most {bound}",
+        scene.rays_traced()
+    );
+}
+
+/// A vertex source that answers differently when asked again cannot put a non-finite corner in
+/// the mesh: `set_vertices` refuses it and leaves the scene as it was (a review's closure answered
+/// finite values to the check and NaN to the copy, and the call succeeded).
+#[test]
+fn a_vertex_source_that_changes_its_answers_is_refused() {
+    let data = kd_friendly();
+    let mut scene = Scene::build(&data.as_source(), &auto(0), Calibration::builtin()).unwrap();
+    let before = scene.mesh().triangles().to_vec();
+    let rays = test_rays(&mesh_of(&data), 12, 100, 5);
+    let hits: Vec<_> = rays.iter().map(|r| scene.intersect(r)).collect();
+    let n = data.vertices.len();
+    let calls = std::cell::Cell::new(0usize);
+    let flaky = |i: usize| {
+        calls.set(calls.get() + 1);
+        if calls.get() <= n {
+            data.vertices[i].map(|c| c * 2.0)
+        } else {
+            [f32::NAN; 3]
+        }
+    };
+    assert!(scene.set_vertices(0, &flaky).is_err());
+    assert_eq!(scene.mesh().triangles(), &before[..]);
+    for (r, h) in rays.iter().zip(&hits) {
+        assert!(scene.intersect(r).same_bits(h));
+    }
+}

@@ -69,10 +69,10 @@ pub enum rq_budget_kind {
     /// tapped rays put W* at or below the rays remaining.
     RQ_BUDGET_EXPECTED = 0,
     /// An upper bound (a renderer that may stop early): below the estimated break-even the scene
-    /// stays on the grid unless the renderer's own tapped rays later put W* at or below the rays
-    /// that may still come (`rq_scene_update`); above it the scene starts on the grid and
-    /// `rq_scene_update` switches as with an unknown budget, but never once the rays that may
-    /// still come are fewer than W*.
+    /// stays on the grid unless a later `rq_scene_update` is told a `rays_remaining` at or above
+    /// the W* the renderer's own tapped rays give (with `rays_remaining` 0 it stays); above it the
+    /// scene starts on the grid and `rq_scene_update` switches as with an unknown budget, but
+    /// never once the rays that may still come are fewer than W*.
     RQ_BUDGET_AT_MOST = 1,
 }
 

@@ -63,7 +63,19 @@ pub(super) fn choose(
     };
     let sample_params = options.samples.for_budget(options.expected_rays);
     let features = sample_grid(grid, mesh, samples, &sample_params);
-    let estimate = calibration.estimate(&features);
+    // No sample ray (none asked for, or an empty set given): nothing to estimate from, so the
+    // estimates are NaN (`SampleParams::camera_side`'s promise) and the grid stays; the calibration
+    // alone would price a scene it never saw a ray of (a review's finding: a kd-tree built as a
+    // trial and kept by a check on no rays).
+    let estimate = if features.rays == 0 {
+        CostEstimate {
+            grid_ray_seconds: f64::NAN,
+            kd_ray_seconds: f64::NAN,
+            kd_build_seconds: f64::NAN,
+        }
+    } else {
+        calibration.estimate(&features)
+    };
     let mut outcome = match options.expected_rays {
         0 => Outcome::OnlineOnGrid,
         budget_rays => match (estimate.decide(budget_rays), options.budget_kind) {

@@ -64,8 +64,9 @@ pub enum BudgetKind {
     #[default]
     Expected,
     /// An upper bound (a renderer that may stop early, adaptive sampling): below the estimated
-    /// break-even the scene stays on the grid unless the renderer's own tapped rays later put W* at
-    /// or below the rays that may still come ([`Scene::update`]); above it the scene starts on the
+    /// break-even the scene stays on the grid unless a later [`Scene::update`] is told a
+    /// `rays_remaining` at or above the W* the renderer's own tapped rays give (with
+    /// `rays_remaining` 0 it stays); above it the scene starts on the
     /// grid and switches as with an unknown budget, but never once the rays that may still come
     /// are fewer than W*.
     AtMost,
@@ -251,6 +252,9 @@ pub struct Scene {
     accel: Accel,
     report: SceneReport,
     rays_traced: u64,
+    /// The caller said no rays remain ([`RAYS_REMAINING_NONE`]): nothing switches again, and a
+    /// later [`Scene::set_vertices`] builds for no more rays.
+    rays_ended: bool,
     options: BuildOptions,
     /// The unknown-budget rule while the scene is on the grid with `Auto` (None otherwise).
     online: Option<OnlineSwitch>,
@@ -379,6 +383,7 @@ impl Scene {
                 geometry_count: 0,
             },
             rays_traced: 0,
+            rays_ended: false,
             options: *options,
             online: None,
             grid_samples: None,
@@ -536,14 +541,21 @@ impl Scene {
         let range = self.mesh.geometry_start(g) as usize..self.mesh.geometry_start(g + 1) as usize;
         let mut saved = budget.vec(range.len(), "the geometry's old triangles")?;
         saved.extend_from_slice(&self.mesh.triangles()[range]);
-        self.mesh.set_vertices(g, vertex)?;
-        match choose(
-            &self.mesh,
-            &self.options,
-            &self.calibration,
-            None,
-            &mut budget,
-        ) {
+        if let Err(e) = self.mesh.set_vertices(g, vertex) {
+            self.mesh.restore_triangles(g, &saved);
+            return Err(e);
+        }
+        // The choice again, for the rays still to come: a known budget less the rays traced (at
+        // least one: 0 would read as unknown), none after the caller said so.
+        let options = BuildOptions {
+            expected_rays: match (self.rays_ended, self.options.expected_rays) {
+                (true, _) => 1,
+                (false, 0) => 0,
+                (false, budget) => budget.saturating_sub(self.rays_traced).max(1),
+            },
+            ..self.options
+        };
+        match choose(&self.mesh, &options, &self.calibration, None, &mut budget) {
             Ok(choice) => {
                 self.accel = choice.accel;
                 self.take_choice_facts(
@@ -552,8 +564,12 @@ impl Scene {
                     choice.online,
                     choice.grid_samples,
                 );
-                // The moved scene stands even without a tap (it only improves a later decision).
-                if self.refresh_tap(&mut budget).is_err() {
+                if self.rays_ended {
+                    // Nothing switches again (`update`'s promise): no rule, no tap.
+                    self.online = None;
+                    self.tap = None;
+                } else if self.refresh_tap(&mut budget).is_err() {
+                    // The moved scene stands even without a tap (it only improves a later decision).
                     self.tap = None;
                 }
                 self.refresh_report();
@@ -637,6 +653,7 @@ impl Scene {
     fn update_held(&mut self, rays_traced: u64, rays_remaining: u64) -> Result<(), BuildError> {
         self.rays_traced = self.rays_traced.saturating_add(rays_traced);
         if rays_remaining == RAYS_REMAINING_NONE {
+            self.rays_ended = true;
             self.online = None;
             self.tap = None;
             return Ok(());

@@ -90,7 +90,11 @@ impl CostEstimate {
         if self.kd_build_seconds == 0.0 {
             return 0.0;
         }
-        // An infinite saving (the grid is hopeless) makes W* = 0; an infinite build makes it ∞.
+        // An infinite build makes W* = ∞ (also against an infinite saving, whose quotient is NaN);
+        // an infinite saving (the grid is hopeless) with a finite build makes it 0.
+        if self.kd_build_seconds == f64::INFINITY {
+            return f64::INFINITY;
+        }
         self.kd_build_seconds / saving
     }
 
@@ -109,7 +113,7 @@ impl CostEstimate {
             return 0.0;
         }
         let paid = share * self.grid_ray_seconds;
-        if !(paid > 0.0) {
+        if !(paid > 0.0) || self.kd_build_seconds == f64::INFINITY {
             return f64::INFINITY;
         }
         self.kd_build_seconds / paid
@@ -613,6 +617,10 @@ mod tests {
         // A big saving: W* comes first and the trial never matters.
         let big = est(3.0, 1.0, 2000.0);
         assert_eq!(big.build_rays(), 1000.0);
+        // An infinite build against an infinite grid cost: never worth it (not ∞/∞ = NaN).
+        let hopeless = est(f64::INFINITY, 1e-6, f64::INFINITY);
+        assert_eq!(hopeless.break_even_rays(), f64::INFINITY);
+        assert_eq!(hopeless.trial_rays(), f64::INFINITY);
         // Estimates that cannot tell: no trial either.
         assert!(est(f64::NAN, 1.0, 1.0).build_rays().is_nan());
         assert_eq!(

@@ -234,6 +234,22 @@ impl Coord {
     }
 }
 
+/// Whether `(p1 − p0) × (p2 − p0)` is exactly zero for the f32 corners `tri` (finite): the three
+/// points are collinear (or repeated), so the triangle has no area. Each difference is exact in
+/// 5 limbs, each product in 10: nothing rounds, unlike the same product in f64, which can be zero
+/// for a triangle of area ~1 when its coordinates span 60 binary orders of magnitude.
+pub(crate) fn edge_cross_is_zero(tri: &[Vec3; 3]) -> bool {
+    let coord = |k: usize, a: usize| Coord::from_f32(tri[k].to_array()[a]);
+    let edge = |k: usize| [0, 1, 2].map(|a| coord(k, a).sub(&coord(0, a)));
+    let (e1, e2) = (edge(1), edge(2));
+    (0..3).all(|a| {
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        let p: Int<10> = e1[b].mul(&e2[c]);
+        let q: Int<10> = e1[c].mul(&e2[b]);
+        p.cmp_signed(&q) == Ordering::Equal
+    })
+}
+
 /// `x · 2^bits` as an integer, for an `x` that is a multiple of `2^-bits` (f32 values and their
 /// midpoints with `bits = 150`), `|x| < 2^129`.
 fn scaled_integer(x: f64, bits: i32) -> Coord {

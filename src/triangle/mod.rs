@@ -27,6 +27,7 @@ pub mod packs;
 
 pub use filter::Block4;
 
+pub(crate) use exact::edge_cross_is_zero;
 use exact::ExactTriangle;
 
 /// Unit roundoff of f64 (2^-53).
