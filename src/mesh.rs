@@ -112,24 +112,6 @@ pub trait MeshSource {
     }
 }
 
-/// Whether every coordinate of `tri` is finite (`x − x` is 0 for a finite `x`, NaN otherwise).
-#[inline(always)]
-#[allow(clippy::eq_op)] // `x − x` on purpose: it is the finiteness test.
-fn finite(tri: &[Vec3; 3]) -> bool {
-    let [p, q, r] = tri.map(glam::Vec3A::from);
-    ((p - p) + (q - q) + (r - r)).cmpeq(glam::Vec3A::ZERO).all()
-}
-
-/// The refusal of a triangle (indices `idx`) for its first non-finite corner in `tri` (its first
-/// corner's index when all are finite).
-#[cold]
-fn non_finite_corner(tri: &[Vec3; 3], idx: [u32; 3]) -> MeshError {
-    let k = (0..3).find(|&k| !tri[k].is_finite()).unwrap_or(0);
-    MeshError::NonFiniteVertex {
-        vertex: idx[k] as usize,
-    }
-}
-
 /// The refusal of triangle `triangle`, whose indices `idx` include one not below `vertex_count`.
 #[cold]
 fn index_out_of_range(triangle: usize, idx: [u32; 3], vertex_count: usize) -> MeshError {
@@ -413,10 +395,12 @@ impl TriMesh {
         for i in range.clone() {
             let idx = self.indices[i];
             let tri = idx.map(|vi| Vec3::from(vertex(vi as usize)));
-            if !finite(&tri) {
+            if let Some(k) = (0..3).find(|&k| !tri[k].is_finite()) {
                 return Err(BuildError::InvalidGeometry {
                     geometry: g,
-                    error: non_finite_corner(&tri, idx),
+                    error: MeshError::NonFiniteVertex {
+                        vertex: idx[k] as usize,
+                    },
                 });
             }
             self.tris[i] = tri;

@@ -1038,11 +1038,7 @@ fn moving_vertices_keeps_what_the_rays_traced_settled() {
     assert_eq!(scene.report().structure, Structure::Grid);
     // Under a bound, with fewer than W* rays left of it after the move.
     let bound = (w * 1000.0) as u64;
-    let options = BuildOptions {
-        budget_kind: BudgetKind::AtMost,
-        ..auto(bound)
-    };
-    let mut scene = Scene::build(&data.as_source(), &options, &c).unwrap();
+    let mut scene = Scene::build(&data.as_source(), &at_most(bound), &c).unwrap();
     assert_eq!(scene.report().outcome, Outcome::OnlineOnGrid);
     let w = scene.report().break_even_rays;
     scene.update(bound - (w as u64) / 2, 0).unwrap();

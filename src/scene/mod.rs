@@ -66,9 +66,8 @@ pub enum BudgetKind {
     /// An upper bound (a renderer that may stop early, adaptive sampling): below the estimated
     /// break-even the scene stays on the grid unless a later [`Scene::update`] is told a
     /// `rays_remaining` at or above the W* the renderer's own tapped rays give (with
-    /// `rays_remaining` 0 it stays); above it the scene starts on the
-    /// grid and switches as with an unknown budget, but never once the rays that may still come
-    /// are fewer than W*.
+    /// `rays_remaining` 0 it stays); above it the scene starts on the grid and switches as with an
+    /// unknown budget, but never once the rays that may still come are fewer than W*.
     AtMost,
 }
 

@@ -14,8 +14,8 @@ pub(super) const U32: f32 = f32::EPSILON / 2.0;
 ///
 /// Guarantees (non-empty): `cell_size[a] = (max − min)[a] / res[a]` in f32 (the planes the walk
 /// computes, `min + k·cell_size`, are the ones tests recompute), `1 ≤ res[a] ≤`
-/// [`MAX_AXIS_CELLS`], the product of `res` is below `u32::MAX`, and every non-degenerate triangle lies inside `bounds` by at least the
-/// padding of [`Shape::new`].
+/// [`MAX_AXIS_CELLS`], the product of `res` is below `u32::MAX`, and every non-degenerate
+/// triangle lies inside `bounds` by at least the padding of [`Shape::new`].
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Shape {
     /// The padded box.

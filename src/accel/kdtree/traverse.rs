@@ -91,8 +91,8 @@ impl Clip {
     /// `+∞`, the far one when `−∞`) or NaN when the origin is on the plane (both children: the ray
     /// lies in the plane, which both closed boxes hold). A component whose inverse overflows, or
     /// underflows (so its relative error is unbounded), or whose box faces' `t` are not safely
-    /// finite, gets NaN: no constraint on that axis, every split visits both sides. An array of four, indexed by the node's 2-bit axis, needs no
-    /// checks.
+    /// finite, gets NaN: no constraint on that axis, every split visits both sides. An array of
+    /// four, indexed by the node's 2-bit axis, needs no checks.
     #[inline(always)]
     pub(super) fn new(ray: &Ray, bounds: &Aabb) -> Option<Clip> {
         if bounds.is_empty() {
